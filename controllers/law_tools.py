@@ -118,6 +118,8 @@ def check_weights(controller: str, first: tuple[str, Any], second: tuple[str, An
 #: The spread of the estimated base points may differ from the nominal geometry's by
 #: this factor (a calibration error changes it by a few per cent; a unit slip by 1000).
 BASE_SPREAD_FACTOR = 2.0
+#: The 15 pairs of six points.
+_PAIRS = tuple((i, j) for i in range(6) for j in range(i + 1, 6))
 
 
 def base_points_of(controller: str, context: Any) -> np.ndarray:
@@ -134,14 +136,16 @@ def base_points_of(controller: str, context: Any) -> np.ndarray:
         ContextError: Not (6, 3) finite, or one of the slips above (with the figures).
     """
     A = np.asarray(context.base_points, dtype=float)
-    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
+    # in Python floats (every trial's reset: numpy's calls on six points cost 40 us)
+    points = A.tolist()
+    if A.shape != (6, 3) or not all(math.isfinite(x) for p in points for x in p):
         raise ContextError(controller, "base_points",
                            f"expected 6x3 finite values [m], got shape {A.shape}"
                            + ("" if A.shape != (6, 3) else " with a value not finite"))
     nominal = np.asarray(context.geometry.base_points, dtype=float)
-    i, j = np.triu_indices(6, 1)
-    spread = float(np.median(np.linalg.norm(A[i] - A[j], axis=1)
-                             / np.linalg.norm(nominal[i] - nominal[j], axis=1)))
+    nominals = nominal.tolist()
+    spread = sorted(math.dist(points[i], points[j]) / math.dist(nominals[i], nominals[j])
+                    for i, j in _PAIRS)[7]  # the median of the 15 ratios
     if not 1.0 / BASE_SPREAD_FACTOR <= spread <= BASE_SPREAD_FACTOR:
         hint = MILLIMETRES if 500.0 <= spread <= 2000.0 else ""
         raise ContextError(controller, "base_points",
@@ -150,9 +154,9 @@ def base_points_of(controller: str, context: Any) -> np.ndarray:
     pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
     if pose is not None:
         seen = np.asarray(pose.rotation, dtype=float) @ nominal.T
-        seen = seen.T + np.asarray(pose.translation, dtype=float)
-        off_camera = float(np.linalg.norm(A - seen, axis=1).max())
-        off_base = float(np.linalg.norm(A - nominal, axis=1).max())
+        seen = (seen.T + np.asarray(pose.translation, dtype=float)).tolist()
+        off_camera = max(math.dist(p, q) for p, q in zip(points, seen, strict=True))
+        off_base = max(math.dist(p, q) for p, q in zip(points, nominals, strict=True))
         if off_base < 0.5 * off_camera:
             raise ContextError(
                 controller, "base_points",

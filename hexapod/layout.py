@@ -93,8 +93,12 @@ class Layout:
         return row[..., self[block]].reshape((*row.shape[:-1], *self.shapes[block]))
 
     def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
-        """Every block's :meth:`view` of ``row`` (write into them to fill the row)."""
-        return {block: self.view(row, block) for block in self.slices}
+        """Every block's :meth:`view` of ``row`` (write into them to fill the row; the row
+        checked once: every trial's reset makes its kernel's views)."""
+        self.view(row, next(iter(self.slices)))  # (raises for a row of another layout)
+        lead, shapes = row.shape[:-1], self.shapes
+        return {block: row[..., s].reshape((*lead, *shapes[block]))
+                for block, s in self.slices.items()}
 
     def split(self, v: Any) -> dict[str, Any]:
         """The pieces of a symbolic (or numeric) vector ``v`` (:attr:`size`, 1) by block
