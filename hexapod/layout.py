@@ -82,20 +82,25 @@ class Layout:
         return Layout([*((b, self.shapes[b]) for b in self.slices), *blocks],
                       self.name if name is None else name)
 
-    def view(self, row: np.ndarray, block: str) -> np.ndarray:
-        """The view of ``block`` in ``row`` (..., :attr:`size`), shaped as declared (a
-        one-number block of shape 1 is a (1,) view; of shape ``()`` a 0-d view)."""
+    def _check_row(self, row: np.ndarray) -> None:
+        """Refuse rows (..., n) that are not this layout's: ``n`` not :attr:`size`, or the
+        last axis not contiguous (a block's slice would then be a copy, not a view)."""
         if row.shape[-1] != self.size or row.strides[-1] != row.itemsize:
             raise LayoutError(self.name, f"a row of {row.shape[-1]} numbers (stride "
                               f"{row.strides[-1]} bytes): the layout has {self.size}, "
                               "contiguous")
+
+    def view(self, row: np.ndarray, block: str) -> np.ndarray:
+        """The view of ``block`` in ``row`` (..., :attr:`size`), shaped as declared (a
+        one-number block of shape 1 is a (1,) view; of shape ``()`` a 0-d view)."""
+        self._check_row(row)
         # the last axis is contiguous: splitting a block of it is a view, never a copy
         return row[..., self[block]].reshape((*row.shape[:-1], *self.shapes[block]))
 
     def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
         """Every block's :meth:`view` of ``row`` (write into them to fill the row; the row
         checked once: every trial's reset makes its kernel's views)."""
-        self.view(row, next(iter(self.slices)))  # (raises for a row of another layout)
+        self._check_row(row)
         lead, shapes = row.shape[:-1], self.shapes
         return {block: row[..., s].reshape((*lead, *shapes[block]))
                 for block, s in self.slices.items()}
