@@ -12,13 +12,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study.setup_check import (
-    Problem,
-    SetupReport,
-    Where,
-    check_setup,
-    fixed_task_problems,
-)
+from benchmarks.study.fixed_task_check import fixed_task_problems
+from benchmarks.study.setup_check import Problem, SetupReport, Where, check_setup
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import check_replace, write_output
 

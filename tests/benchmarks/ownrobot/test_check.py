@@ -188,7 +188,7 @@ def test_a_fixed_task_whose_start_the_camera_cannot_resolve_is_refused() -> None
     check said the setup could run and every leg-edge trial then refused to move. The
     start and goal are examined: an error when every controller steers by the image, a
     warning naming them otherwise, nothing for a camera that sees them."""
-    from benchmarks.study.setup_check import fixed_task_problems
+    from benchmarks.study.fixed_task_check import fixed_task_problems
     from hexapod.kinematics import Transform
     from vision.cameras.perspective import PerspectiveCamera
 
