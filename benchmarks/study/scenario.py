@@ -26,6 +26,7 @@ from benchmarks.study.scenario_checks import (
     check_trajectory_task,
     referenced_file,
 )
+from benchmarks.study.scenario_files import preset_camera, read_files, read_model
 from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     CLOCK_KEYS,
@@ -47,6 +48,7 @@ from benchmarks.study.scenario_model import (
     check_range,
 )
 from benchmarks.study.scenario_payload import PAYLOAD_KEYS, PayloadConfig, check_payload
+from benchmarks.study.scenario_ranges import typed_value
 from hexapod.config import load_toml, suggest
 from hexapod.exceptions import ConfigFileError
 from hexapod.trajectory import PLANES, PROFILES, SHAPES
@@ -74,36 +76,6 @@ def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
     return value
 
 
-def _typed(value: Any, kind: type, path: str, key: str, choices: tuple[str, ...] = ()) -> Any:
-    if isinstance(value, list) and kind in (float, int, bool, str):  # (a sweep axis?)
-        raise ScenarioError(path, f"expected one value, got the list {value!r}: this key "
-                            "cannot be swept (docs/scenarios.md lists the sweepable keys)",
-                            key=key)
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ScenarioError(path, f"expected a number, got {value!r}", key=key)
-        if value != value or value in (float("inf"), float("-inf")):
-            raise ScenarioError(path, f"expected a finite number, got {value!r}", key=key)
-        return float(value)
-    if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(path, f"expected an integer, got {value!r}", key=key)
-        return value
-    if kind is bool:
-        if not isinstance(value, bool):
-            raise ScenarioError(path, f"expected true or false, got {value!r}", key=key)
-        return value
-    if kind is str:
-        if not isinstance(value, str):
-            raise ScenarioError(path, f"expected a string, got {value!r}", key=key)
-        if choices and value not in choices:
-            hint = suggest(value, choices)
-            raise ScenarioError(path, f"expected one of {', '.join(choices)}, got {value!r}",
-                                key=key, suggestion=hint)
-        return value
-    raise TypeError(kind)
-
-
 def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
                      sweepable: tuple[str, ...] = (), choices: dict[str, tuple[str, ...]]
                      | None = None, sweep: dict[str, list[Any]] | None = None) -> Any:
@@ -121,7 +93,7 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
         if isinstance(value, list) and key in sweepable:
             if not value:
                 raise ScenarioError(path, "an empty list cannot be a sweep axis", key=dotted)
-            values = [_typed(v, kind, path, dotted, choices.get(key, ())) for v in value]
+            values = [typed_value(v, kind, path, dotted, choices.get(key, ())) for v in value]
             for v in values:
                 check_range(v, dotted, path)
             if sweep is None:
@@ -141,10 +113,10 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
             raise ScenarioError(path, "expected a list of numbers", key=dotted)
         elif f.name in ("noise_deg", "file") and value is not None:
             kind = float if f.name == "noise_deg" else str
-            kwargs[key] = _typed(value, kind, path, dotted)
+            kwargs[key] = typed_value(value, kind, path, dotted)
             check_range(kwargs[key], dotted, path)
         else:
-            kwargs[key] = _typed(value, kind, path, dotted, choices.get(key, ()))
+            kwargs[key] = typed_value(value, kind, path, dotted, choices.get(key, ()))
             check_range(kwargs[key], dotted, path)
     return cls(**kwargs)
 
@@ -175,12 +147,12 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                 key=key, suggestion=suggest(key, SCENARIO_KEYS))
     if "name" not in table:
         raise ScenarioError(path, "missing required key", key="name")
-    name = _checked_name(_typed(table["name"], str, path, "name"), "scenario name", path,
+    name = _checked_name(typed_value(table["name"], str, path, "name"), "scenario name", path,
                          "name")
-    description = _typed(table.get("description", ""), str, path, "description")
-    seed = _typed(table.get("seed", 1), int, path, "seed")
+    description = typed_value(table.get("description", ""), str, path, "description")
+    seed = typed_value(table.get("seed", 1), int, path, "seed")
     check_range(seed, "seed", path)
-    trials = _typed(table.get("trials", 10), int, path, "trials")
+    trials = typed_value(table.get("trials", 10), int, path, "trials")
     check_range(trials, "trials", path)
     raw_controllers = table.get("controllers")
     if raw_controllers is None:
@@ -233,13 +205,13 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     robot_geometry = None
     robot_preset: str | None = "deltalab"
     if "geometry" in robot:
-        value = _typed(robot["geometry"], str, path, "robot.geometry")
+        value = typed_value(robot["geometry"], str, path, "robot.geometry")
         robot_geometry = referenced_file(base_dir, value, "robot.geometry", path)
         robot_preset = None
     elif "preset" in robot:
-        robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
-    robot_model, model_data = _read_model(robot, base_dir, path)
-    dt = _typed(robot.get("dt", 0.02), float, path, "robot.dt")
+        robot_preset = typed_value(robot["preset"], str, path, "robot.preset", ("deltalab",))
+    robot_model, model_data = read_model(robot, base_dir, path)
+    dt = typed_value(robot.get("dt", 0.02), float, path, "robot.dt")
     check_range(dt, "robot.dt", path)
     world, physics_dt = _parse_world(robot, dt, path)
 
@@ -272,21 +244,21 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     camera_preset: str | None = "front"
     opencv: dict[str, Any] | None = None
     if "file" in camera and calibration is None:
-        camera_file = referenced_file(base_dir, _typed(camera["file"], str, path, "camera.file"),
-                                      "camera.file", path)
+        camera_file = referenced_file(
+            base_dir, typed_value(camera["file"], str, path, "camera.file"), "camera.file", path)
         camera_preset = None
     elif calibration is not None:
-        camera_file = referenced_file(base_dir, _typed(camera[calibration], str, path,
-                                                       f"camera.{calibration}"),
+        camera_file = referenced_file(base_dir, typed_value(camera[calibration], str, path,
+                                                            f"camera.{calibration}"),
                                       f"camera.{calibration}", path)
         camera_preset = None
         opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
                   if k in camera}
         if "pose" in opencv:
-            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni", "fisheye"))
+            typed_value(opencv["pose"], str, path, "camera.pose", ("front", "omni", "fisheye"))
     elif "preset" in camera:
-        camera_preset = _typed(camera["preset"], str, path, "camera.preset",
-                               ("front", "omni", "fisheye"))
+        camera_preset = typed_value(camera["preset"], str, path, "camera.preset",
+                                    ("front", "omni", "fisheye"))
 
     sensor_t = dict(_section(table, "sensor", path))
     sensor_keys = ("kind", "teach_frames", *(f.name for f in fields(ImageConfig)))
@@ -294,9 +266,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         if key not in sensor_keys:
             raise ScenarioError(path, f"unknown key; expected one of {', '.join(sensor_keys)}",
                                 key=f"sensor.{key}", suggestion=suggest(key, sensor_keys))
-    sensor = _typed(sensor_t.pop("kind", "geometric"), str, path, "sensor.kind",
+    sensor = typed_value(sensor_t.pop("kind", "geometric"), str, path, "sensor.kind",
                     ("geometric", "image"))
-    teach_frames = _typed(sensor_t.pop("teach_frames", 1), int, path, "sensor.teach_frames")
+    teach_frames = typed_value(sensor_t.pop("teach_frames", 1), int, path, "sensor.teach_frames")
     check_range(teach_frames, "sensor.teach_frames", path)
     image = _parse_dataclass(ImageConfig, sensor_t, path, "sensor", (),
                              {"background": ("plain", "cluttered")})
@@ -345,11 +317,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
-    geometry_data, camera_data, points = _read_files(robot_geometry, camera_file, cal, opencv,
+    geometry_data, camera_data, points = read_files(robot_geometry, camera_file, cal, opencv,
                                                      robot_preset, path)
     if task.kind == "fixed":
         check_fixed_task(task, robot_preset, geometry_data, path)
-    check_lens_error(_preset_camera(camera_preset) if camera_data is None
+    check_lens_error(preset_camera(camera_preset) if camera_data is None
                      and camera_file is None and camera_preset is not None else camera_data,
                      cal_err, sweep, path)
     reference = check_reference(table.get("reference", {}), path)
@@ -365,26 +337,6 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         camera_data=camera_data, calibration_points=points, controller_options=dict(defaults),
         robot_model=robot_model, model_data=model_data,
     )
-
-
-def _read_model(robot: dict[str, Any], base_dir: Path, path: str) -> tuple[str | None, Any]:
-    """``[robot] model``: a robot file whose ``[inertia]`` and ``[drives]`` are the
-    controllers' model (e.g. ``hexapod-bench identify``'s ``identified.toml``), read once.
-
-    Raises:
-        ScenarioError: The file is missing or invalid, naming it.
-    """
-    if "model" not in robot:
-        return None, None
-    from hexapod.exceptions import HexapodError
-    from hexapod.geometry import HexapodGeometry
-
-    value = _typed(robot["model"], str, path, "robot.model")
-    model = referenced_file(base_dir, value, "robot.model", path)
-    try:
-        return model, HexapodGeometry.from_toml(model)
-    except HexapodError as exc:
-        raise ScenarioError(path, f"{model}: {exc}", key="robot.model") from None
 
 
 def _shared_for(defaults: dict[str, Any], own: dict[str, Any], path: str, key: str
@@ -425,8 +377,8 @@ def _checked_name(value: str, what: str, path: str, key: str) -> str:
 def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:
     """``[robot] world`` and ``physics_dt`` (in the dynamic world, a divisor of the control
     period ``dt``; the kinematic world has no physics step)."""
-    world = _typed(robot.get("world", "kinematic"), str, path, "robot.world", WORLDS)
-    physics_dt = _typed(robot.get("physics_dt", 0.001), float, path, "robot.physics_dt")
+    world = typed_value(robot.get("world", "kinematic"), str, path, "robot.world", WORLDS)
+    physics_dt = typed_value(robot.get("physics_dt", 0.001), float, path, "robot.physics_dt")
     check_range(physics_dt, "robot.physics_dt", path)
     if world == "dynamic":
         check_physics_dt(dt, physics_dt, path)
@@ -447,65 +399,6 @@ def check_physics_dt(dt: float, physics_dt: float, path: str) -> None:
         raise ScenarioError(path, f"the control period robot.dt ({dt:g} s) is not a whole "
                             f"number of physics steps of {physics_dt:g} s",
                             key="robot.physics_dt")
-
-
-def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig,
-                opencv: dict[str, Any] | None, robot_preset: str | None, path: str
-                ) -> tuple[Any, Any, Any]:
-    """Read the files a scenario names, once (see :class:`Scenario`).
-
-    Args:
-        geometry_file, camera_file: The robot and camera files (None: presets).
-        cal: The calibration settings (``file`` with method ``"file"``).
-        opencv: For an OpenCV calibration file: ``pose`` (a preset's placement) or
-            ``camera_from_base`` (a table as in camera files), ``width_px``/``height_px``.
-        robot_preset: The robot preset (a preset placement scales with the robot).
-        path: The scenario file (errors).
-
-    Raises:
-        ScenarioError: A file missing or invalid, naming it and the key at fault.
-    """
-    from benchmarks.study.calibration import load_calibrated_base_points
-    from hexapod.geometry import HexapodGeometry
-    from hexapod.geometry import preset as geometry_preset
-    from vision.cameras import camera_preset, load_camera
-    from vision.cameras.files.project import read_pose_table
-    from vision.exceptions import CameraError
-
-    try:
-        geometry = None if geometry_file is None else HexapodGeometry.from_toml(geometry_file)
-        camera = None
-        if camera_file is not None and opencv is not None:
-            robot = geometry or geometry_preset(robot_preset or "deltalab")
-            pose = (camera_preset(opencv["pose"], robot).camera_from_base if "pose" in opencv
-                    else read_pose_table({"camera_from_base": opencv.get("camera_from_base",
-                                                                         {})}, path))
-            size = None
-            if "width_px" in opencv or "height_px" in opencv:
-                for given, other in (("width_px", "height_px"), ("height_px", "width_px")):
-                    if given in opencv and other not in opencv:
-                        raise ScenarioError(path, f"{given} needs {other} (the image's "
-                                            "size, both in pixels)", key=f"camera.{other}")
-                size = (_typed(opencv.get("width_px"), int, path, "camera.width_px"),
-                        _typed(opencv.get("height_px"), int, path, "camera.height_px"))
-            camera = load_camera(camera_file, camera_from_base=pose, image_size=size)
-        elif camera_file is not None:
-            camera = load_camera(camera_file)
-        points = (load_calibrated_base_points(cal.file)
-                  if cal.method == "file" and cal.file else None)
-    except ConfigFileError as exc:
-        raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
-    except CameraError as exc:
-        raise ScenarioError(camera_file or path, str(exc), key="camera") from None
-    return geometry, camera, points
-
-
-def _preset_camera(name: str) -> Any:
-    """A camera preset's lens, for the checks of a scenario that names it (the preset on
-    the default robot: its lens model does not depend on the robot)."""
-    from vision.cameras import camera_preset
-
-    return camera_preset(name)
 
 
 def builtin_scenarios() -> dict[str, Path]:

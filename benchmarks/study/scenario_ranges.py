@@ -6,6 +6,7 @@ from typing import Any
 
 from benchmarks.exceptions import ScenarioError
 from benchmarks.study.scenario_payload import PAYLOAD_RANGES
+from hexapod.config import suggest
 
 #: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
 #: A value that parses but cannot describe a study (a negative seed, a 1e308 mm error,
@@ -116,3 +117,41 @@ def _unit_hint(value: float, key: str, unit: str) -> str:
             return (f" (a slip of units? {key} is in {unit}; {scaled:g} {unit} would be in "
                     "range)")
     return ""
+
+
+def typed_value(value: Any, kind: type, path: str, key: str, choices: tuple[str, ...] = ()) -> Any:
+    """``value`` of scenario key ``key`` as ``kind`` (a finite float, an int, a bool or a
+    string of ``choices``).
+
+    Raises:
+        ScenarioError: Naming the file and key: a list where one value is expected (a key
+            that cannot be swept), another type, a number not finite, a string not among
+            ``choices`` (with the close one).
+    """
+    if isinstance(value, list) and kind in (float, int, bool, str):  # (a sweep axis?)
+        raise ScenarioError(path, f"expected one value, got the list {value!r}: this key "
+                            "cannot be swept (docs/scenarios.md lists the sweepable keys)",
+                            key=key)
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ScenarioError(path, f"expected a number, got {value!r}", key=key)
+        if value != value or value in (float("inf"), float("-inf")):
+            raise ScenarioError(path, f"expected a finite number, got {value!r}", key=key)
+        return float(value)
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ScenarioError(path, f"expected an integer, got {value!r}", key=key)
+        return value
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(path, f"expected true or false, got {value!r}", key=key)
+        return value
+    if kind is str:
+        if not isinstance(value, str):
+            raise ScenarioError(path, f"expected a string, got {value!r}", key=key)
+        if choices and value not in choices:
+            hint = suggest(value, choices)
+            raise ScenarioError(path, f"expected one of {', '.join(choices)}, got {value!r}",
+                                key=key, suggestion=hint)
+        return value
+    raise TypeError(kind)
