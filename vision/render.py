@@ -9,7 +9,7 @@ checked per pixel by ray casting on random poses), the platform disc first or la
 depending on the side of its plane the camera is on (:meth:`Renderer.draw_order`).
 Each polygon is blended into the image by its exact coverage of every pixel (the
 area of the pixel's unit square inside it, i.e. the box filter of
-an ideal sensor pixel; :class:`vision.kernels.PolygonFiller`, compiled C), so a
+an ideal sensor pixel; :class:`vision.polygon_fill.PolygonFiller`, compiled C), so a
 rendered edge has its 50 % level on the true edge whatever its direction and
 sub-pixel position. Without a C compiler the renderer falls back to OpenCV's
 anti-aliased polygons (``cv2.fillPoly`` with ``LINE_AA`` and 4 fractional bits,
@@ -123,8 +123,9 @@ class Renderer:
         self._noise_pos: np.ndarray | None = None
         self._noise_neg: np.ndarray | None = None
         from vision import kernels
+        from vision.polygon_fill import PolygonFiller
 
-        self._filler = (kernels.PolygonFiller(camera.width, camera.height)
+        self._filler = (PolygonFiller(camera.width, camera.height)
                         if use_compiled and kernels.available() else None)
 
     @property

@@ -12,6 +12,7 @@ from tests.vision.detection_checks import same_detection
 from vision import kernels
 from vision.cameras import FRONT_DISTORTION, front_camera, omni_camera
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, _robust_fit
+from vision.polygon_fill import PolygonFiller
 from vision.render import Renderer, RenderStyle
 
 
@@ -189,7 +190,7 @@ def test_polygon_coverage_is_the_exact_pixel_area(rng) -> None:
     import cv2
 
     W, H = 40, 30
-    f = kernels.PolygonFiller(W, H)
+    f = PolygonFiller(W, H)
     for k in range(40):
         centre = rng.uniform([-5.0, -5.0], [W + 5.0, H + 5.0])
         ang = np.sort(rng.uniform(0.0, 2.0 * np.pi, 6))
@@ -208,7 +209,7 @@ def test_polygon_union_and_blending(rng) -> None:
     one of them covers the shared pixels fully; where both cover a pixel partially their
     coverages add (capped at 1). Blending is ``round(v + (level - v) * coverage)``; a
     NaN vertex draws nothing."""
-    f = kernels.PolygonFiller(20, 10)
+    f = PolygonFiller(20, 10)
     a = np.array([[2.3, 0.5], [12.6, 0.5], [12.6, 8.5], [2.3, 8.5]])  # rows 1..8 whole
     b = a + np.array([5.0, 0.0])
     cov = f.coverage([a, b[::-1]])  # opposite orientations: still the union
