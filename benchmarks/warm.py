@@ -57,12 +57,15 @@ def warm_scenario(name: str) -> WarmResult:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.runner import execute, plan
     from benchmarks.study.scenario import load_scenario
+    from benchmarks.study.scenario_checks import check_controllers
     from hexapod.compiled import LANE_ROWS
 
     start = time.perf_counter()
     sc = load_scenario(name)
     trials = LANE_ROWS if sc.world == "dynamic" else 1
-    sc = sc.with_overrides(trials, None, None, STEPS, None)
+    # each controller with its options resolved as ``run`` resolves them (a file-wide
+    # [controller_options] key given only to the controllers that declare it)
+    sc, _ = check_controllers(sc.with_overrides(trials, None, None, STEPS, None))
     units = plan([sc], record_trials=0)
     for unit in units:
         try:
