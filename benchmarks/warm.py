@@ -65,7 +65,11 @@ def warm_scenario(name: str) -> WarmResult:
     trials = LANE_ROWS if sc.world == "dynamic" else 1
     # each controller with its options resolved as ``run`` resolves them (a file-wide
     # [controller_options] key given only to the controllers that declare it)
-    sc, _ = check_controllers(sc.with_overrides(trials, None, None, STEPS, None))
+    try:
+        sc, _ = check_controllers(sc.with_overrides(trials, None, None, STEPS, None))
+    except Exception as exc:  # as a failed unit: logged, the other scenarios warmed
+        log.warning("warm %s: %s", name, exc)
+        return WarmResult(name, 0, time.perf_counter() - start)
     units = plan([sc], record_trials=0)
     for unit in units:
         try:

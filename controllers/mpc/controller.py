@@ -72,7 +72,8 @@ class MPCLaw(PredictiveLaw):
         tolerance: SQP convergence on the first move:
             ``|delta tau_0|_inf <= tolerance * max(|tau_0|_inf, 1e-3)`` [m/s, rad/s].
         time_limit: Solve time after which the step falls back [s], or None.
-        regularization: Added to the diagonal of the QP Hessian.
+        regularization: Weight of a Tikhonov term ``|tau_k|^2`` on the twists, in the cost
+            and its QP (the Hessian's diagonal and the gradient).
         threshold: Singular-value threshold of the fallback law.
         compiled: Generate the QP-data kernel and DAQP to C (built once per problem
             structure, cached on disk); False: CasADi virtual machine and

@@ -316,12 +316,13 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
         else:
             lo_c.append(-ca.repmat(vmax, 6, 1))
             hi_c.append(ca.repmat(vmax, 6, 1))
-    # Effort on the leg velocities of the current inverse Jacobian, regularization.
+    # Effort on the leg velocities of the current inverse Jacobian, and a Tikhonov term on
+    # the twists: both in the cost too, so that the merit's slope is the QP's g^T d.
     JtJ = P["effort"] * (J0.T @ J0) + P["reg"] * ca.MX.eye(6)
     for k in range(N):
         Hb[k][k] += JtJ
         gb[k] += JtJ @ U[k]
-        cost += P["effort"] * ca.sumsqr(J0 @ U[k])
+        cost += P["effort"] * ca.sumsqr(J0 @ U[k]) + P["reg"] * ca.sumsqr(U[k])
     H = ca.blockcat([[Hb[i][j] if j >= i else Hb[j][i].T for j in range(N)]
                      for i in range(N)])
     C = ca.vertcat(*rows_c)

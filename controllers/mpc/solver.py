@@ -77,8 +77,9 @@ SCREENED_VISIBILITY_ROWS = 48
 #: lie 0.02 N outside its bounds and a velocity plan 1e-5 m/s above its speed limit, on
 #: the MPCs' badly scaled Hessians; at 1e-10 they lie within 3e-14).
 DAQP_PRIMAL_TOL = 1e-10
-#: How far a solution may lie outside its rows, relative to ``1 + |C d|``: beyond, the
-#: solve is refused whatever the solver's status says.
+#: How far a solution may lie outside its rows, relative to ``1 + |C| |d|`` (the size of
+#: the terms of each row's sum, so that the same problem in other units is judged the
+#: same): beyond, the solve is refused whatever the solver's status says.
 ROW_TOLERANCE = 1e-9
 
 
@@ -93,9 +94,9 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
 
 def outside_rows(C: np.ndarray, x: np.ndarray, lba: np.ndarray, uba: np.ndarray) -> float:
     """How far ``C x`` lies outside ``[lba, uba]`` beyond :data:`ROW_TOLERANCE`, relative
-    to ``1 + |C x|`` (0: inside)."""
+    to ``1 + |C| |x|`` row by row (0: inside)."""
     v = C @ x
-    excess = np.maximum(lba - v, v - uba) / (1.0 + np.abs(v))
+    excess = np.maximum(lba - v, v - uba) / (1.0 + np.abs(C) @ np.abs(x))
     return max(float(excess.max(initial=0.0)) - ROW_TOLERANCE, 0.0)
 
 
@@ -252,7 +253,8 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
             time_limit: float | None = None
             ) -> tuple[np.ndarray | None, bool, str, QPResult | None, int]:
     """Gauss-Newton SQP from ``U`` (the warm start), with a backtracking line search on
-    the L1 merit ``cost + mu * violation`` when ``merit_rows`` are given (else full steps).
+    the L1 merit ``cost / 2 + mu * violation`` (:func:`merit`) when ``merit_rows`` are
+    given (else full steps).
 
     Converged when the first move (the only one applied) steps by ``|delta U_0|_inf <=
     tolerance * max(|U_0|_inf, floor)``. The last allowed iteration takes the full QP

@@ -195,12 +195,14 @@ def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: igno
     """The condensed QP (global model, tilt and visibility rows) is the Gauss-Newton model
     of the cost and the linearisation of the constraints: ``2 g`` is the gradient of the
     cost and ``C`` the Jacobian of the constraint values (stage rows), by central
-    differences at a random ``U``; the SQP's merit has the slope ``g^T d``."""
+    differences at a random ``U``; the SQP's merit has the slope ``g^T d`` (with an effort
+    weight and a regularization large enough to count: a regularization in the QP but not
+    in the cost gave a slope 3 % off at 1e-2)."""
     world = _world("perspective", other_geometry)
     Rs, ts = world.poses(2, np.random.default_rng(4), margin=0.02)
     ctrl = _mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", horizon=4,
                 visibility=True, max_tilt_deg=10.0, max_iter=1, accept_unconverged=True,
-                compiled=False)
+                compiled=False, regularization=1e-3, effort_weight=1e-2)
     ctrl.step(world.observation(Rs[0], ts[0]))
     spec = ctrl._spec
     o = ctrl._out.slices

@@ -78,13 +78,29 @@ def test_daqp_solutions_keep_their_rows_on_badly_scaled_problems(compiled: bool,
     res = daqp(H, g, C, lba, uba, compiled)
     assert res.step is not None, res.status
     v = C @ res.step
-    assert np.all(v >= lba - ROW_TOLERANCE * (1 + np.abs(v)))
-    assert np.all(v <= uba + ROW_TOLERANCE * (1 + np.abs(v)))
+    size = 1 + np.abs(C) @ np.abs(res.step)
+    assert np.all(v >= lba - ROW_TOLERANCE * size)
+    assert np.all(v <= uba + ROW_TOLERANCE * size)
     assert np.abs(v).max() > 0.049  # some rows are active (the test's point)
 
 
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_daqp_judges_a_problem_the_same_in_other_units(scale: float) -> None:
+    """The rows and bounds of the badly scaled QPs multiplied by ``scale`` (the same
+    problem in other units, the same solution): none of 40 is refused. Measured relative
+    to ``1 + |C x|``, 8 of 40 were refused at 1e3 (on their bounds to 1e-9 to 8.5e-9 of
+    it: DAQP's accuracy), and 1 of 40 at scale 1."""
+    refused = []
+    for seed in range(40):
+        H, g, C, lba, uba = _badly_scaled_qp(seed)
+        res = daqp(H, g, scale * C, scale * lba, scale * uba, True)
+        if res.step is None:
+            refused.append((seed, res.status))
+    assert not refused, refused
+
+
 def test_outside_rows_measures_the_relative_excess() -> None:
-    C = np.eye(2)
+    C = np.eye(2)  # |C| |x| = |C x|: the excess relative to 1 + |C x|
     lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     assert outside_rows(C, np.array([0.5, -1.0]), lo, hi) == 0.0
     assert outside_rows(C, np.array([1.0 + 1e-12, 0.0]), lo, hi) == 0.0  # within
@@ -92,3 +108,7 @@ def test_outside_rows_measures_the_relative_excess() -> None:
     assert excess == pytest.approx(2e-6 / (2.0 + 2e-6) - ROW_TOLERANCE, rel=1e-9)
     assert outside_rows(C, np.array([0.0, -1.5]), lo, hi) == pytest.approx(
         0.5 / 2.5 - ROW_TOLERANCE, rel=1e-12)
+    # a row whose terms cancel: relative to the terms' size 1 + 100 + 101.5, not 1 + 1.5
+    row = np.array([[1.0, -1.0]])
+    assert outside_rows(row, np.array([100.0, 101.5]), lo[:1], hi[:1]) == pytest.approx(
+        0.5 / 202.5 - ROW_TOLERANCE, rel=1e-12)
