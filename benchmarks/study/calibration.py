@@ -146,6 +146,17 @@ def read_calibrated_file(path: str | Path) -> tuple[np.ndarray, dict[str, str] |
     return points, dict(recorded)
 
 
+def _prepared(sc: Scenario, out: Path, overwrite: bool) -> tuple[Any, Any, dict[str, str]]:
+    """A calibration's output directory checked (nothing written), then the scenario's
+    nominal robot, its camera and the ``[made_with]`` table of what it is made with."""
+    from benchmarks.study.outdir import check_calibration_directory
+    from benchmarks.study.provenance import made_with, scenario_setup
+
+    check_calibration_directory(out, overwrite)
+    robot_name, nominal, camera_name, camera = scenario_setup(sc)
+    return nominal, camera, made_with(robot_name, nominal, camera_name, camera)
+
+
 def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
                     repeat: int = 1, solver: str | None = None,
                     correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
@@ -162,14 +173,10 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             ``overwrite``); nothing is written.
     """
     from benchmarks.sim import make_trial, trial_rng
-    from benchmarks.study.outdir import check_calibration_directory
-    from benchmarks.study.provenance import made_with, scenario_setup
     from vision.calibration import calibrate, error_summary
     from vision.calibration.study import simulated_observations
 
-    check_calibration_directory(out, overwrite)
-    robot_name, nominal, camera_name, camera = scenario_setup(sc)
-    provenance = made_with(robot_name, nominal, camera_name, camera)
+    nominal, camera, provenance = _prepared(sc, out, overwrite)
     cal_cfg = sc.calibration
     if configurations is not None:
         cal_cfg = replace(cal_cfg, configurations=configurations)
@@ -276,14 +283,10 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
             ``overwrite``); nothing is written.
     """
     from benchmarks.exceptions import BenchmarkError
-    from benchmarks.study.outdir import check_calibration_directory
-    from benchmarks.study.provenance import made_with, scenario_setup
     from vision.calibration import CalibrationData, calibrate
     from vision.exceptions import CalibrationError
 
-    check_calibration_directory(out, overwrite)
-    robot_name, nominal, camera_name, camera = scenario_setup(sc)
-    provenance = made_with(robot_name, nominal, camera_name, camera)
+    nominal, camera, provenance = _prepared(sc, out, overwrite)
     given = CalibrationData.load(observations)
 
     def solve(data: Any) -> Any:
