@@ -96,8 +96,12 @@ def outside_rows(C: np.ndarray, x: np.ndarray, lba: np.ndarray, uba: np.ndarray)
     """How far ``C x`` lies outside ``[lba, uba]`` beyond :data:`ROW_TOLERANCE`, relative
     to ``1 + |C| |x|`` row by row (0: inside)."""
     v = C @ x
-    excess = np.maximum(lba - v, v - uba) / (1.0 + np.abs(C) @ np.abs(x))
-    return max(float(excess.max(initial=0.0)) - ROW_TOLERANCE, 0.0)
+    raw = np.maximum(lba - v, v - uba)
+    over = np.flatnonzero(raw > ROW_TOLERANCE)  # (a row's size is at least 1)
+    if not len(over):  # the common case: no row's size needed
+        return 0.0
+    excess = raw[over] / (1.0 + np.abs(C[over]) @ np.abs(x))
+    return max(float(excess.max()) - ROW_TOLERANCE, 0.0)
 
 
 class CompiledQP:
