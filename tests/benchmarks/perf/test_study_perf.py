@@ -103,9 +103,24 @@ def test_a_tracking_wrapper_s_reset_and_step_are_the_controller_s(
         capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """A trajectory task's controller is the tracking wrapper around the law: its reset
     (the goals of every period, 0.3 s of CPU more here) is the controller's reset, not the
-    engine's bookkeeping."""
+    engine's bookkeeping. Measured against the same run without the extra 0.3 s, so that
+    the machine's own bookkeeping time (0.1 to 0.17 s of CPU on 2-core machines) is not
+    compared with a fixed bound."""
     import controllers.tracking as tracking
 
+    def stages() -> dict[str, float]:
+        """CPU [us] of each stage over the run's trial-steps."""
+        assert study.main(["--scenario", "paccot2008-tracking", "--trials", "2",
+                           "--repeats", "1", "--controllers", "leg-edge",
+                           "--breakdown"]) == 0
+        head, table = capsys.readouterr().out.split("# Where the time goes")
+        steps = int(next(line for line in head.splitlines()
+                         if line.startswith("| leg-edge")).split("|")[2])
+        return {line.split("|")[1].strip(): float(line.split("|")[2]) * steps
+                for line in table.splitlines()
+                if line.startswith("| ") and "stage" not in line}
+
+    before = stages()
     real = tracking.tracking_plans
 
     def slow(*args: object, **kwargs: object) -> object:
@@ -115,15 +130,10 @@ def test_a_tracking_wrapper_s_reset_and_step_are_the_controller_s(
         return real(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(tracking, "tracking_plans", slow)
-    assert study.main(["--scenario", "paccot2008-tracking", "--trials", "2", "--repeats",
-                       "1", "--controllers", "leg-edge", "--breakdown"]) == 0
-    head, table = capsys.readouterr().out.split("# Where the time goes")
-    steps = int(next(line for line in head.splitlines()
-                     if line.startswith("| leg-edge")).split("|")[2])
-    rows = {line.split("|")[1].strip(): float(line.split("|")[2])
-            for line in table.splitlines() if line.startswith("| ") and "stage" not in line}
-    assert rows["trial set-up: controller reset"] * steps >= 0.3e6 * 0.99
-    assert rows["other (the engine's numpy bookkeeping, rows)"] * steps < 0.3e6 / 2
+    after = stages()
+    reset, other = "trial set-up: controller reset", "other (the engine's numpy bookkeeping, rows)"
+    assert after[reset] - before[reset] >= 0.3e6 * 0.8
+    assert after[other] - before[other] < 0.3e6 / 2
 
 
 def test_an_unknown_controller_is_refused() -> None:
