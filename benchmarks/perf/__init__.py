@@ -4,6 +4,11 @@ figure, each with its own ``main(argv)``)."""
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
 
 
 def seed(text: str) -> int:
@@ -26,3 +31,13 @@ def check_counts(parser: argparse.ArgumentParser, args: argparse.Namespace,
         value = getattr(args, option.lstrip("-").replace("-", "_"))
         if value is not None and value < 1:
             parser.error(f"{option}: at least 1, got {value}")
+
+
+def cli_in_tree(tree: str | Path, args: Sequence[str]) -> subprocess.CompletedProcess[str]:
+    """``python -m benchmarks.cli ARGS`` with the code of another tree of this project (its
+    directory the working directory and first on ``PYTHONPATH``), output captured: how
+    two commits are compared on one machine (:mod:`benchmarks.perf.rows_diff`,
+    :mod:`benchmarks.perf.alternate`)."""
+    return subprocess.run([sys.executable, "-m", "benchmarks.cli", *args], cwd=tree,
+                          env={**os.environ, "PYTHONPATH": str(tree)}, capture_output=True,
+                          text=True, check=False)

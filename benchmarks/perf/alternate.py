@@ -18,10 +18,8 @@ Run (a tree of the old commit from ``git worktree add /tmp/old REV``)::
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +27,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchmarks.perf import check_counts
+from benchmarks.perf import check_counts, cli_in_tree
 
 #: ``run``'s last line: the trials' own time.
 TRIALS = re.compile(r"(\d+) trials in ([0-9.]+) s")
@@ -57,12 +55,8 @@ def run_once(tree: Path, args: Sequence[str], out: Path,
     Raises:
         RuntimeError: The command failed (its exit status and the end of its output).
     """
-    env = {**os.environ, "PYTHONPATH": str(tree)}
-    argv = [sys.executable, "-m", "benchmarks.cli", *(a.replace("{out}", str(out))
-                                                        for a in args)]
     start = clock()
-    done = subprocess.run(argv, cwd=tree, env=env, capture_output=True, text=True,
-                          check=False)
+    done = cli_in_tree(tree, [a.replace("{out}", str(out)) for a in args])
     wall = clock() - start
     if done.returncode != 0:
         tail = (done.stdout + done.stderr).strip().splitlines()[-5:]

@@ -18,12 +18,13 @@ from __future__ import annotations
 import glob
 import json
 import os
-import subprocess
 import sys
 import time
 from typing import Any
 
 import numpy as np
+
+from benchmarks.perf import cli_in_tree
 
 #: Scenarios that render images (slow): one trial of 60 steps.
 IMAGE = {"andreff2006-images", "andreff2006-images-distorted", "tahri2009-images"}
@@ -39,14 +40,12 @@ def run(tree: str, out: str, engine: str = "batched", only: str = "") -> None:
         if only and name not in only.split(","):
             continue
         trials = 1 if name in IMAGE else 3
-        cmd = [sys.executable, "-m", "benchmarks.cli", "run", path, "--out", f"{out}/{name}",
-               "--workers", "1", "--trials", str(trials), "--no-progress", "--record",
-               str(trials), "--engine", engine]
+        cmd = ["run", path, "--out", f"{out}/{name}", "--workers", "1", "--trials",
+               str(trials), "--no-progress", "--record", str(trials), "--engine", engine]
         if name in IMAGE:
             cmd += ["--max-steps", "60"]
         start = time.time()
-        proc = subprocess.run(cmd, cwd=tree, env={**os.environ, "PYTHONPATH": tree},
-                              capture_output=True, text=True, check=False)
+        proc = cli_in_tree(tree, cmd)
         print(f"{name}: rc={proc.returncode} {time.time() - start:.0f}s", flush=True)
         if proc.returncode:
             print(proc.stderr[-2000:], flush=True)
