@@ -375,7 +375,7 @@ def _quiet_dask() -> None:
     local cluster's (which read the environment): its scheduler's and nannies' INFO lines,
     and their warnings while the run stops its cluster, said nothing to a user of the
     study, and a worker whose heartbeat met the scheduler already closed after a Ctrl-C
-    printed an error with its traceback over the run's message (once in five runs of the
+    printed an error with its traceback over the run's message (once in four runs of the
     interrupted-run test). A worker's real failure reaches this process as its unit's
     error (:class:`~benchmarks.exceptions.ClusterError`); ``--verbose`` shows them all."""
     os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "critical")
