@@ -77,14 +77,13 @@ def ratios(pairs: Sequence[tuple[Timed, Timed]], trials: bool = False) -> list[f
 def summary(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:
     """The printed lines: each pair, then the median ratios."""
     lines = []
-    for k, (old, new) in enumerate(pairs, 1):
-        line = f"pair {k}: old {old.wall_s:.2f} s, new {new.wall_s:.2f} s, " \
-               f"{old.wall_s / new.wall_s:.2f} times"
+    wall = ratios(pairs)
+    for k, ((old, new), ratio) in enumerate(zip(pairs, wall, strict=True), 1):
+        line = f"pair {k}: old {old.wall_s:.2f} s, new {new.wall_s:.2f} s, {ratio:.2f} times"
         if old.trials_s is not None and new.trials_s is not None:
             line += f" (trials {old.trials_s:.1f} / {new.trials_s:.1f} s, " \
                     f"{old.trials_s / new.trials_s:.2f} times)"
         lines.append(line)
-    wall = ratios(pairs)
     if wall:
         lines.append(f"median {statistics.median(wall):.2f} times over {len(wall)} pairs "
                      f"({min(wall):.2f} to {max(wall):.2f}); new faster in "
