@@ -94,14 +94,14 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
 
 def outside_rows(C: np.ndarray, x: np.ndarray, lba: np.ndarray, uba: np.ndarray) -> float:
     """How far ``C x`` lies outside ``[lba, uba]`` beyond :data:`ROW_TOLERANCE`, relative
-    to ``1 + |C| |x|`` row by row (0: inside)."""
+    to ``1 + |C| |x|`` row by row (0: inside; infinite where a row or ``x`` is NaN)."""
     v = C @ x
     raw = np.maximum(lba - v, v - uba)
-    over = np.flatnonzero(raw > ROW_TOLERANCE)  # (a row's size is at least 1)
+    over = np.flatnonzero(~(raw <= ROW_TOLERANCE))  # (NaN too; a row's size is >= 1)
     if not len(over):  # the common case: no row's size needed
         return 0.0
-    excess = raw[over] / (1.0 + np.abs(C[over]) @ np.abs(x))
-    return max(float(excess.max()) - ROW_TOLERANCE, 0.0)
+    worst = float(np.max(raw[over] / (1.0 + np.abs(C[over]) @ np.abs(x))))
+    return math.inf if math.isnan(worst) else max(worst - ROW_TOLERANCE, 0.0)
 
 
 class CompiledQP:

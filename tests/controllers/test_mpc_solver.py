@@ -112,3 +112,12 @@ def test_outside_rows_measures_the_relative_excess() -> None:
     row = np.array([[1.0, -1.0]])
     assert outside_rows(row, np.array([100.0, 101.5]), lo[:1], hi[:1]) == pytest.approx(
         0.5 / 202.5 - ROW_TOLERANCE, rel=1e-12)
+
+
+def test_outside_rows_refuses_a_nan_row_or_solution() -> None:
+    """A NaN bound or solution lies outside (infinitely): the filter of the rows over the
+    tolerance (``raw > tol``) had dropped NaN rows and passed them as inside."""
+    C, lo, hi = np.eye(2), np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    assert outside_rows(C, np.array([0.0, 0.0]), np.array([np.nan, -1.0]), hi) == np.inf
+    assert outside_rows(C, np.array([np.nan, 0.0]), lo, hi) == np.inf
+    assert outside_rows(C, np.array([0.0, 0.0]), lo, np.array([1.0, np.nan])) == np.inf
