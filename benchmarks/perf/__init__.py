@@ -37,7 +37,10 @@ def cli_in_tree(tree: str | Path, args: Sequence[str]) -> subprocess.CompletedPr
     """``python -m benchmarks.cli ARGS`` with the code of another tree of this project (its
     directory the working directory and first on ``PYTHONPATH``), output captured: how
     two commits are compared on one machine (:mod:`benchmarks.perf.rows_diff`,
-    :mod:`benchmarks.perf.alternate`)."""
+    :mod:`benchmarks.perf.alternate`). ``tree`` is resolved first (a relative
+    ``PYTHONPATH`` entry named nothing from inside the tree, where the command's own
+    processes start); paths in ``args`` are read from the tree, so give them absolute."""
+    tree = Path(tree).resolve()
     return subprocess.run([sys.executable, "-m", "benchmarks.cli", *args], cwd=tree,
                           env={**os.environ, "PYTHONPATH": str(tree)}, capture_output=True,
                           text=True, check=False)

@@ -2,12 +2,14 @@
 
 A machine's speed drifts over minutes and hours (a 2-core machine took 58 to 184 s for
 the same study on different days), so the only fair comparison of two commits is one
-run of each after the other, several times: ``OLD``, ``NEW``, ``OLD``, ``NEW``, ... Each
-run is ``python -m benchmarks.cli ARGS`` in its tree (``PYTHONPATH`` at it), ``{out}``
-in the arguments replaced by a new directory per run; the first ``--warmup`` pairs are
-run and left out (a tree's first run may compile its kernels). Printed: each pair's wall
-times, the ratio old / new, and the median ratio, then the same for the trials alone
-when the command prints them (``run``'s ``N trials in X s``).
+run of each after the other, several times, the order turned every pair (``OLD NEW``,
+``NEW OLD``, ``OLD NEW``, ...: a steady drift favours neither tree). Each run is
+``python -m benchmarks.cli ARGS`` in its tree (``PYTHONPATH`` at it), ``{out}`` in the
+arguments replaced by a new directory per run; the first ``--warmup`` pairs are run and
+left out (a tree's first run may compile its kernels). Printed: each pair's wall times,
+the ratio old / new, and the median ratio, then the same for the trials alone when the
+command prints them (``run``'s ``N trials in X s``); when a run fails, the pairs timed
+before it, then its error.
 
 Run (a tree of the old commit from ``git worktree add /tmp/old REV``)::
 
@@ -65,30 +67,37 @@ def run_once(tree: Path, args: Sequence[str], out: Path,
     return Timed(str(tree), wall, float(found[-1][1]) if found else None)
 
 
-def ratios(pairs: Sequence[tuple[Timed, Timed]], trials: bool = False) -> list[float]:
-    """Old / new of each pair, of the wall times or of the trials' (pairs without them
-    left out)."""
-    if not trials:
-        return [old.wall_s / new.wall_s for old, new in pairs]
-    return [old.trials_s / new.trials_s for old, new in pairs
-            if old.trials_s is not None and new.trials_s is not None]
+class AlternationError(RuntimeError):
+    """A run failed: its message, and the pairs timed before it (``pairs``)."""
+
+    def __init__(self, message: str, pairs: list[tuple[Timed, Timed]]) -> None:
+        super().__init__(message)
+        self.pairs = pairs
+
+
+def ratio(old: float | None, new: float | None) -> float | None:
+    """``old / new``, or None without both or with ``new`` not positive (a run that
+    printed ``0.0 s``)."""
+    return None if old is None or new is None or not new > 0 else old / new
 
 
 def summary(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:
-    """The printed lines: each pair, then the median ratios."""
-    lines = []
-    wall = ratios(pairs)
-    for k, ((old, new), ratio) in enumerate(zip(pairs, wall, strict=True), 1):
-        line = f"pair {k}: old {old.wall_s:.2f} s, new {new.wall_s:.2f} s, {ratio:.2f} times"
-        if old.trials_s is not None and new.trials_s is not None:
-            line += f" (trials {old.trials_s:.1f} / {new.trials_s:.1f} s, " \
-                    f"{old.trials_s / new.trials_s:.2f} times)"
+    """The printed lines: each pair, then the median ratios (of the wall times, and of the
+    trials' times of the pairs that printed both)."""
+    lines, wall, alone = [], [], []
+    for k, (old, new) in enumerate(pairs, 1):
+        line = f"pair {k}: old {old.wall_s:.2f} s, new {new.wall_s:.2f} s"
+        if (r := ratio(old.wall_s, new.wall_s)) is not None:
+            wall.append(r)
+            line += f", {r:.2f} times"
+        if (t := ratio(old.trials_s, new.trials_s)) is not None:
+            alone.append(t)
+            line += f" (trials {old.trials_s:.1f} / {new.trials_s:.1f} s, {t:.2f} times)"
         lines.append(line)
     if wall:
         lines.append(f"median {statistics.median(wall):.2f} times over {len(wall)} pairs "
                      f"({min(wall):.2f} to {max(wall):.2f}); new faster in "
                      f"{sum(r > 1 for r in wall)} of {len(wall)}")
-    alone = ratios(pairs, trials=True)
     if alone:
         lines.append(f"trials alone: median {statistics.median(alone):.2f} times "
                      f"({min(alone):.2f} to {max(alone):.2f})")
@@ -101,17 +110,29 @@ def _progress(line: str) -> None:
 
 def alternate(old: Path, new: Path, args: Sequence[str], rounds: int, warmup: int,
               report: Callable[[str], None] = _progress) -> list[tuple[Timed, Timed]]:
-    """``warmup + rounds`` pairs, old then new, each pair reported as it ends (progress,
-    on standard error by default); the timed pairs (the warm-up's left out)."""
-    pairs = []
+    """``warmup + rounds`` pairs, the order turned every pair (old first in the first),
+    each pair reported as it ends (progress, on standard error by default); the timed
+    pairs as ``(old, new)`` (the warm-up's left out).
+
+    Raises:
+        AlternationError: A run failed (with the pairs timed before it).
+    """
+    trees = {"old": Path(old).resolve(), "new": Path(new).resolve()}
+    pairs: list[tuple[Timed, Timed]] = []
     with tempfile.TemporaryDirectory(prefix="hexapod-alternate-") as scratch:
         for k in range(warmup + rounds):
-            timed = (run_once(old, args, Path(scratch) / f"old-{k}"),
-                     run_once(new, args, Path(scratch) / f"new-{k}"))
+            order = ("old", "new") if k % 2 == 0 else ("new", "old")
+            timed: dict[str, Timed] = {}
+            for name in order:
+                try:
+                    timed[name] = run_once(trees[name], args, Path(scratch) / f"{name}-{k}")
+                except RuntimeError as exc:
+                    raise AlternationError(str(exc), pairs) from None
             label = "warm-up" if k < warmup else f"pair {k - warmup + 1}"
-            report(f"{label}: old {timed[0].wall_s:.2f} s, new {timed[1].wall_s:.2f} s")
+            report(f"{label}: old {timed['old'].wall_s:.2f} s, new {timed['new'].wall_s:.2f} s"
+                   f" ({order[0]} first)")
             if k >= warmup:
-                pairs.append(timed)
+                pairs.append((timed["old"], timed["new"]))
     return pairs
 
 
@@ -141,9 +162,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if command[0] == "run" and not any("{out}" in a for a in command):
         p.error("a run needs --out {out} (each run writes into a new directory)")
     try:
-        pairs = alternate(args.old.resolve(), args.new.resolve(), command, args.rounds,
-                          args.warmup)
-    except RuntimeError as exc:
+        pairs = alternate(args.old, args.new, command, args.rounds, args.warmup)
+    except AlternationError as exc:
+        if exc.pairs:  # (the pairs timed before the failure are not lost)
+            print("\n".join(summary(exc.pairs)))
         print(f"error: {exc}", file=sys.stderr)
         return 1
     print("\n".join(summary(pairs)))

@@ -33,7 +33,9 @@ TIMING = {"step_time_us", "detect_time_ms"}
 
 
 def run(tree: str, out: str, engine: str = "batched", only: str = "") -> None:
-    """Run the scenarios of ``tree`` into ``out/NAME`` (see the module docstring)."""
+    """Run the scenarios of ``tree`` into ``out/NAME`` (see the module docstring; both
+    paths from the working directory: the runs read theirs from the tree)."""
+    tree, out = os.path.abspath(tree), os.path.abspath(out)
     os.makedirs(out, exist_ok=True)
     for path in sorted(glob.glob(f"{tree}/benchmarks/scenarios/*.toml")):
         name = os.path.basename(path)[:-5]

@@ -1,6 +1,7 @@
-"""``benchmarks.perf.alternate``: a command run in two trees, old then new, in real
-subprocesses (two stand-in trees whose ``benchmarks.cli`` logs its call and prints a
-trials line), the warm-up left out, the ratios from what the runs printed."""
+"""``benchmarks.perf.alternate``: a command run in two trees, the order turned every
+pair, in real subprocesses (two stand-in trees whose ``benchmarks.cli`` logs its call
+and prints a trials line that changes from call to call), the warm-up left out, the
+ratios from what the runs printed."""
 
 from __future__ import annotations
 
@@ -10,22 +11,28 @@ import pytest
 
 from benchmarks.perf.alternate import Timed, alternate, main, summary
 
+#: The stand-in command line: its ``k``-th call (of its tree) prints ``base + step * k``
+#: seconds of trials, and fails from its ``fail``-th call on.
 CLI = """import os, sys
-with open(os.environ["ALTERNATE_LOG"], "a") as log:
+path = os.environ["ALTERNATE_LOG"]
+with open(path, "a") as log:
     log.write("{name} " + " ".join(sys.argv[1:]) + "\\n")
-if "{fail}":
+with open(path) as log:
+    k = sum(1 for line in log if line.startswith("{name} "))
+if k >= {fail}:
     print("no such scenario: nowhere", file=sys.stderr)
     sys.exit(3)
-print("3000 trials in {trials} s (in-process, 1 worker(s))")
+print(f"3000 trials in {{{base} + {step} * k:.1f}} s (in-process, 1 worker(s))")
 """
 
 
-def _tree(root: Path, name: str, trials: str, fail: bool = False) -> Path:
+def _tree(root: Path, name: str, base: float, step: float = 0.0, fail: int = 10**6
+          ) -> Path:
     tree = root / name
     (tree / "benchmarks").mkdir(parents=True)
     (tree / "benchmarks" / "__init__.py").write_text("")
     (tree / "benchmarks" / "cli.py").write_text(
-        CLI.format(name=name, trials=trials, fail="yes" if fail else ""))
+        CLI.format(name=name, base=base, step=step, fail=fail))
     return tree
 
 
@@ -33,31 +40,65 @@ def test_runs_alternate_in_their_trees_with_a_new_directory_each(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     log = tmp_path / "calls.log"
     monkeypatch.setenv("ALTERNATE_LOG", str(log))
-    old, new = _tree(tmp_path, "old", "12.0"), _tree(tmp_path, "new", "4.0")
+    # old's trials 13, 14, 15, 16 s; new's 2, 4, 6, 8 s: the timed pairs' ratios 3.5,
+    # 2.5 and 2.0 (median 2.5; their mean, 2.67, or any one pair would differ)
+    old, new = _tree(tmp_path, "old", 12.0, 1.0), _tree(tmp_path, "new", 0.0, 2.0)
     lines: list[str] = []
-    pairs = alternate(old, new, ["run", "quick", "--out", "{out}"], rounds=2, warmup=1,
+    pairs = alternate(old, new, ["run", "quick", "--out", "{out}"], rounds=3, warmup=1,
                       report=lines.append)
     calls = [line.split() for line in log.read_text().splitlines()]
-    assert [c[0] for c in calls] == ["old", "new"] * 3  # the warm-up pair, then two
+    # the warm-up pair, then three, the order turned every pair
+    assert [c[0] for c in calls] == ["old", "new", "new", "old"] * 2
     outs = [c[-1] for c in calls]
-    assert len(set(outs)) == 6 and "{out}" not in outs  # a new directory per run
+    assert len(set(outs)) == 8 and "{out}" not in outs  # a new directory per run
     assert all(c[1:3] == ["run", "quick"] for c in calls)
-    assert len(pairs) == 2  # the warm-up left out
-    assert [(a.tree, b.tree) for a, b in pairs] == [(str(old), str(new))] * 2
-    assert all(a.trials_s == 12.0 and b.trials_s == 4.0 for a, b in pairs)
-    assert lines[0].startswith("warm-up: ") and lines[2].startswith("pair 2: ")
-    assert "trials alone: median 3.00 times (3.00 to 3.00)" in summary(pairs)
+    assert len(pairs) == 3  # the warm-up left out
+    assert [(a.tree, b.tree) for a, b in pairs] == [(str(old), str(new))] * 3
+    assert [(a.trials_s, b.trials_s) for a, b in pairs] == [(14, 4), (15, 6), (16, 8)]
+    assert lines[0].startswith("warm-up: ") and lines[0].endswith("(old first)")
+    assert lines[1].startswith("pair 1: ") and lines[1].endswith("(new first)")
+    out = summary(pairs)
+    assert out[0].endswith("(trials 14.0 / 4.0 s, 3.50 times)")
+    assert out[2].endswith("(trials 16.0 / 8.0 s, 2.00 times)")
+    assert out[-1] == "trials alone: median 2.50 times (2.00 to 3.50)"
+
+
+def test_a_relative_tree_is_read_from_the_working_directory(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``sub/old`` given from ``tmp_path``: the run's ``PYTHONPATH`` had stayed relative
+    and was read again inside the tree (``sub/old/sub/old``): no ``benchmarks.cli``."""
+    monkeypatch.setenv("ALTERNATE_LOG", str(tmp_path / "calls.log"))
+    _tree(tmp_path / "sub", "old", 3.0), _tree(tmp_path / "sub", "new", 1.0)
+    monkeypatch.chdir(tmp_path)
+    (pair,) = alternate(Path("sub/old"), Path("sub/new"), ["list"], rounds=1, warmup=0,
+                        report=lambda line: None)
+    assert (pair[0].trials_s, pair[1].trials_s) == (3.0, 1.0)
 
 
 def test_a_failed_run_stops_with_its_status_and_output(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("ALTERNATE_LOG", str(tmp_path / "calls.log"))
-    old, new = _tree(tmp_path, "old", "1"), _tree(tmp_path, "new", "1", fail=True)
+    old, new = _tree(tmp_path, "old", 1.0), _tree(tmp_path, "new", 1.0, fail=1)
     assert main([str(old), str(new), "--rounds", "1", "--", "run", "x", "--out",
                  "{out}"]) == 1
     err = capsys.readouterr().err
     assert "exit status 3" in err and "no such scenario: nowhere" in err
+
+
+def test_the_pairs_before_a_failed_run_are_printed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The new tree fails on its third call (the second timed pair): the first timed
+    pair's line and median are printed before the error (they had been lost)."""
+    monkeypatch.setenv("ALTERNATE_LOG", str(tmp_path / "calls.log"))
+    old, new = _tree(tmp_path, "old", 6.0), _tree(tmp_path, "new", 2.0, fail=3)
+    assert main([str(old), str(new), "--rounds", "3", "--", "run", "x", "--out",
+                 "{out}"]) == 1
+    out, err = capsys.readouterr()
+    assert out.splitlines()[0].startswith("pair 1: ")
+    assert "trials alone: median 3.00 times (3.00 to 3.00)" in out
+    assert "pair 2" not in out and "exit status 3" in err
 
 
 def test_summary_gives_each_pair_and_the_median_ratio() -> None:
@@ -71,6 +112,18 @@ def test_summary_gives_each_pair_and_the_median_ratio() -> None:
     assert len(lines) == 4  # no trials line: none printed
 
 
+def test_summary_leaves_out_a_trials_ratio_it_cannot_form() -> None:
+    """A run that printed ``0.0 s`` of trials (a short command) had divided by zero after
+    every pair had run; its pair's trials ratio is left out, the others' median kept."""
+    pairs = [(Timed("a", 10.0, 9.0), Timed("b", 5.0, 3.0)),
+             (Timed("a", 9.0, 8.0), Timed("b", 3.0, 0.0)),
+             (Timed("a", 4.0, 6.0), Timed("b", 5.0, 1.0)),
+             (Timed("a", 4.0, 2.0), Timed("b", 5.0, 2.0))]
+    lines = summary(pairs)
+    assert lines[1] == "pair 2: old 9.00 s, new 3.00 s, 3.00 times"
+    assert lines[-1] == "trials alone: median 3.00 times (1.00 to 6.00)"
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--", "run", "quick", "--out", "DIR"], "a run needs --out {out}"),
     (["--rounds", "0", "--", "list"], "--rounds: at least 1, got 0"),
@@ -80,7 +133,7 @@ def test_summary_gives_each_pair_and_the_median_ratio() -> None:
 def test_bad_arguments_are_refused_naming_them(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
         message: str) -> None:
-    old, new = _tree(tmp_path, "old", "1"), _tree(tmp_path, "new", "1")
+    old, new = _tree(tmp_path, "old", 1.0), _tree(tmp_path, "new", 1.0)
     with pytest.raises(SystemExit) as exc:
         main([str(old), str(new), *extra])
     assert exc.value.code == 2
@@ -89,7 +142,28 @@ def test_bad_arguments_are_refused_naming_them(
 
 def test_a_tree_that_is_not_the_project_is_refused(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    new = _tree(tmp_path, "new", "1")
+    new = _tree(tmp_path, "new", 1.0)
     with pytest.raises(SystemExit):
         main([str(tmp_path / "nowhere"), str(new), "--", "list"])
     assert "not a code tree of this project" in capsys.readouterr().err
+
+
+
+def test_rows_diff_runs_a_relative_tree_with_paths_from_the_working_directory(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``rows_diff run sub/old rows`` from ``tmp_path``: the scenario's path and ``--out``
+    were passed relative and read by the run from inside the tree (no such scenario; the
+    rows written under ``sub/old/rows``, where ``diff`` does not look)."""
+    from benchmarks.perf import rows_diff
+
+    log = tmp_path / "calls.log"
+    monkeypatch.setenv("ALTERNATE_LOG", str(log))
+    tree = _tree(tmp_path / "sub", "old", 3.0)
+    (tree / "benchmarks" / "scenarios").mkdir()
+    (tree / "benchmarks" / "scenarios" / "quick.toml").write_text("")
+    monkeypatch.chdir(tmp_path)
+    rows_diff.run("sub/old", "rows")
+    (call,) = [line.split() for line in log.read_text().splitlines()]
+    scenario, out = Path(call[2]), Path(call[call.index("--out") + 1])
+    assert scenario == tree / "benchmarks" / "scenarios" / "quick.toml"
+    assert out == tmp_path / "rows" / "quick"
