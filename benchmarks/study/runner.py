@@ -254,14 +254,28 @@ def _quietly(job: Callable[[], None]) -> None:
 
 def _iter_dask(units: list[WorkUnit], address: str, workers: int
                ) -> Iterator[tuple[WorkUnit, Any]]:
+    """The units' results from Dask, its own log lines at errors only in this process
+    while it runs unless ``--verbose`` (the logger's level restored after: a later run
+    of the same process logs as it asks)."""
+    quiet = logging.getLogger().getEffectiveLevel() > logging.INFO  # (not --verbose)
+    dask_log = logging.getLogger("distributed")
+    level = dask_log.level
+    if quiet:
+        dask_log.setLevel(logging.ERROR)
+    try:
+        yield from _dask_results(units, address, workers, quiet)
+    finally:
+        dask_log.setLevel(level)
+
+
+def _dask_results(units: list[WorkUnit], address: str, workers: int, quiet: bool
+                  ) -> Iterator[tuple[WorkUnit, Any]]:
     distributed = _distributed()
     Client, LocalCluster, as_completed = (distributed.Client, distributed.LocalCluster,
                                           distributed.as_completed)
     cluster = None
-    if logging.getLogger().getEffectiveLevel() > logging.INFO:  # (not --verbose)
-        _quiet_dask()
     if address == "local":
-        with _sigint_ignored():  # the cluster's processes leave Ctrl-C to this one
+        with _sigint_ignored(), _cluster_quiet(quiet):  # Ctrl-C is this process's
             # (a dashboard on a free port: None still took 8787, warning when in use)
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", host="127.0.0.1")
@@ -280,7 +294,7 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
                 raise
             yield futures[fut], result
     except BaseException:  # (Ctrl-C: the run stops; see _silent_while_stopping)
-        if logging.getLogger().getEffectiveLevel() > logging.INFO:
+        if quiet:
             stopping = _silent_while_stopping()
         raise
     finally:
@@ -370,16 +384,26 @@ def _silent_while_stopping() -> Iterator[None]:
             lg.setLevel(level)
 
 
-def _quiet_dask() -> None:
-    """Dask's own log lines at errors only in this process, none below critical in the
-    local cluster's (which read the environment): its scheduler's and nannies' INFO lines,
-    and their warnings while the run stops its cluster, said nothing to a user of the
-    study, and a worker whose heartbeat met the scheduler already closed after a Ctrl-C
-    printed an error with its traceback over the run's message (once in four runs of the
+@contextlib.contextmanager
+def _cluster_quiet(quiet: bool) -> Iterator[None]:
+    """With ``quiet``, the local cluster's processes started in the block log nothing
+    below critical (they read ``DASK_LOGGING__DISTRIBUTED`` from the environment, set for
+    the block only: a later ``--verbose`` run of the same process, and the processes it
+    starts, see the user's own). Its scheduler's and nannies' INFO lines, and their
+    warnings while the run stops its cluster, said nothing to a user of the study, and a
+    worker whose heartbeat met the scheduler already closed after a Ctrl-C printed an
+    error with its traceback over the run's message (once in four runs of the
     interrupted-run test). A worker's real failure reaches this process as its unit's
     error (:class:`~benchmarks.exceptions.ClusterError`); ``--verbose`` shows them all."""
-    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "critical")
-    logging.getLogger("distributed").setLevel(logging.ERROR)
+    key = "DASK_LOGGING__DISTRIBUTED"
+    before = os.environ.get(key)
+    if quiet and before is None:
+        os.environ[key] = "critical"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(key, None)
 
 
 @contextlib.contextmanager

@@ -521,3 +521,31 @@ def test_a_resume_with_another_record_count_says_so(
     err = " ".join(capsys.readouterr().err.split())
     assert "warning: --record 0: the directory's run recorded 1 trial(s)" in err, err
     assert json.loads((out / "run.json").read_text())["record"] == 0
+
+
+@pytest.mark.slow
+def test_a_quiet_dask_run_leaves_the_environment_and_logger_as_it_found_them(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A local Dask run without --verbose quiets its cluster's processes through the
+    environment and Dask's logger in this process: both had stayed set after the run, so a
+    later --verbose run of the same process (and every process it started) stayed quiet."""
+    import logging
+
+    import dask.distributed  # (its import sets Dask's logger's level from its configuration)
+
+    monkeypatch.delenv("DASK_LOGGING__DISTRIBUTED", raising=False)
+    dask_log = logging.getLogger("distributed")
+    monkeypatch.setattr(dask_log, "level", logging.DEBUG)  # (a user's own level)
+    seen: list[str | None] = []
+    original = dask.distributed.LocalCluster  # (the one the runner starts)
+
+    def cluster(*args: Any, **kwargs: Any) -> Any:
+        seen.append(os.environ.get("DASK_LOGGING__DISTRIBUTED"))  # as its processes start
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", cluster)
+    units = plan([_scenario(trials=2)], chunk_size=2, record_trials=0)
+    assert run_units(units, tmp_path / "o", workers=1, dask="local") == 2 * 2 * 2
+    assert seen == ["critical"]  # (pytest's root logger is at WARNING: not --verbose)
+    assert "DASK_LOGGING__DISTRIBUTED" not in os.environ
+    assert dask_log.level == logging.DEBUG
