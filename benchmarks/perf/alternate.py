@@ -8,31 +8,40 @@ run of each after the other, several times, the order turned every pair (``OLD N
 arguments replaced by a new directory per run; the first ``--warmup`` pairs are run and
 left out (a tree's first run may compile its kernels). Printed: each pair's wall times,
 the ratio old / new, and the median ratio, then the same for the trials alone when the
-command prints them (``run``'s ``N trials in X s``); when a run fails, the pairs timed
-before it, then its error.
+command prints them (``run``'s ``N trials in X s``), and for ``perf controllers`` each
+controller's per-trial step (its median us in each run, the median over the pairs, and
+whether the new one is within 10 % or 5 us of the old: the measure of a change that should
+not slow any step); when a run fails, the pairs timed before it, then its error.
 
 Run (a tree of the old commit from ``git worktree add /tmp/old REV``)::
 
     python -m benchmarks.perf.alternate /tmp/old . --rounds 5 -- run paccot2008-tracking \\
         --trials 200 --workers 1 --out {out}
+    python -m benchmarks.perf.alternate /tmp/old . --rounds 3 -- perf controllers \\
+        --steps 2000 computed-torque leg-edge joint-space
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import statistics
 import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from benchmarks.perf import check_counts, cli_in_tree
 
 #: ``run``'s last line: the trials' own time.
 TRIALS = re.compile(r"(\d+) trials in ([0-9.]+) s")
+#: A row of ``perf controllers``' table: the controller's name and its median step [us].
+STEP_ROW = re.compile(r"^(\S+)\s+([0-9.]+|nan)\s")
+#: How far a new per-trial step may be behind the old one: 10 %, or 5 us if that is more.
+STEP_SLACK, STEP_SLACK_US = 0.10, 5.0
 
 
 @dataclass(frozen=True)
@@ -43,11 +52,29 @@ class Timed:
         tree: The code tree it ran in.
         wall_s: Its wall time [s], the interpreter's start and exit included.
         trials_s: The trials' time it printed [s], or None.
+        steps_us: The median step per controller of the ``perf controllers`` table it
+            printed [us] (empty: none).
     """
 
     tree: str
     wall_s: float
     trials_s: float | None
+    steps_us: dict[str, float] = field(default_factory=dict)
+
+
+def step_medians(text: str) -> dict[str, float]:
+    """The median step [us] of each controller of a ``perf controllers`` table in
+    ``text``: the rows after its header (``controller  median us ...``)."""
+    out: dict[str, float] = {}
+    rows = False
+    for line in text.splitlines():
+        if line.startswith("controller ") and "median us" in line:
+            rows = True
+        elif rows and (m := STEP_ROW.match(line)) is not None:
+            out[m.group(1)] = float(m.group(2))
+        else:
+            rows = False
+    return out
 
 
 def run_once(tree: Path, args: Sequence[str], out: Path,
@@ -64,7 +91,8 @@ def run_once(tree: Path, args: Sequence[str], out: Path,
         tail = (done.stdout + done.stderr).strip().splitlines()[-5:]
         raise RuntimeError(f"{tree}: exit status {done.returncode}: " + " | ".join(tail))
     found = TRIALS.findall(done.stdout + done.stderr)
-    return Timed(str(tree), wall, float(found[-1][1]) if found else None)
+    return Timed(str(tree), wall, float(found[-1][1]) if found else None,
+                 step_medians(done.stdout))
 
 
 class AlternationError(RuntimeError):
@@ -101,6 +129,35 @@ def summary(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:
     if alone:
         lines.append(f"trials alone: median {statistics.median(alone):.2f} times "
                      f"({min(alone):.2f} to {max(alone):.2f})")
+    return lines + step_lines(pairs)
+
+
+def step_lines(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:
+    """Each controller timed by every run (``perf controllers``): its median step [us] in
+    each pair, old then new, the medians over the pairs, and whether the new median is
+    within :data:`STEP_SLACK` (or :data:`STEP_SLACK_US`, the larger) of the old."""
+    if not pairs or not pairs[0][0].steps_us:
+        return []
+    names = [n for n in pairs[0][0].steps_us
+             if all(n in old.steps_us and n in new.steps_us for old, new in pairs)]
+    lines = [f"per-trial steps, median us over {len(pairs)} pairs, old / new (each pair's "
+             f"in brackets); within: {100 * STEP_SLACK:.0f} % or {STEP_SLACK_US:g} us"]
+    for name in names:
+        olds = [old.steps_us[name] for old, _ in pairs]
+        news = [new.steps_us[name] for _, new in pairs]
+        a, b = statistics.median(olds), statistics.median(news)
+        if not (math.isfinite(a) and math.isfinite(b) and a > 0):  # (every step refused)
+            verdict = "no median to compare"
+        else:
+            within = b - a <= max(STEP_SLACK * a, STEP_SLACK_US)
+            verdict = (f"{b - a:+.1f} us, {100 * (b - a) / a:+.0f} %: "
+                       + ("within" if within else "BEHIND"))
+        lines.append(f"{name}: {a:.1f} / {b:.1f} us [{', '.join(f'{x:.1f}' for x in olds)}"
+                     f" / {', '.join(f'{x:.1f}' for x in news)}]: {verdict}")
+    left = sorted({n for old, new in pairs for n in (*old.steps_us, *new.steps_us)}
+                  - set(names))
+    if left:
+        lines.append("not timed by every run (left out): " + ", ".join(left))
     return lines
 
 

@@ -22,17 +22,24 @@ with open(path) as log:
 if k >= {fail}:
     print("no such scenario: nowhere", file=sys.stderr)
     sys.exit(3)
+if sys.argv[1:2] == ["perf"]:  # perf controllers' table: (name, us + more * k^2)
+    print("controller step time, reference robot, front camera, all features visible")
+    print("controller                        median us    p95 us  x joint  budget us")
+    for row, us, more in {table!r}:
+        print(f"{{row:<32}} {{us + more * k * k:>10.1f}} {{2 * us:>9.1f}}      1.0")
+    print("(a line after the table)")
+    sys.exit(0)
 print(f"3000 trials in {{{base} + {step} * k:.1f}} s (in-process, 1 worker(s))")
 """
 
 
-def _tree(root: Path, name: str, base: float, step: float = 0.0, fail: int = 10**6
-          ) -> Path:
+def _tree(root: Path, name: str, base: float, step: float = 0.0, fail: int = 10**6,
+          table: tuple[tuple[str, float, float], ...] = ()) -> Path:
     tree = root / name
     (tree / "benchmarks").mkdir(parents=True)
     (tree / "benchmarks" / "__init__.py").write_text("")
     (tree / "benchmarks" / "cli.py").write_text(
-        CLI.format(name=name, base=base, step=step, fail=fail))
+        CLI.format(name=name, base=base, step=step, fail=fail, table=table))
     return tree
 
 
@@ -167,3 +174,36 @@ def test_rows_diff_runs_a_relative_tree_with_paths_from_the_working_directory(
     scenario, out = Path(call[2]), Path(call[call.index("--out") + 1])
     assert scenario == tree / "benchmarks" / "scenarios" / "quick.toml"
     assert out == tmp_path / "rows" / "quick"
+
+
+def test_perf_controllers_steps_compared_controller_by_controller(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``perf controllers`` in both trees: each controller's median over the pairs, old /
+    new, and whether the new one is within 10 % or 5 us. ``joint-space`` old 11, 14, 19,
+    new 14, 17, 22 us (medians 14 and 17; their means would be 14.7 and 17.7): +3 us
+    (+21 %, within 5 us); ``leg-edge`` old 40, new 50: +10 us, +25 % (behind);
+    ``leg-edge-qp`` old 200, 203, 208, new 215: +12 us, +6 % (within 10 %); a controller
+    only one tree has is left out, named."""
+    monkeypatch.setenv("ALTERNATE_LOG", str(tmp_path / "calls.log"))
+    old = _tree(tmp_path, "old", 1.0, table=(("joint-space", 10.0, 1.0),
+                                             ("leg-edge", 40.0, 0.0),
+                                             ("leg-edge-qp", 199.0, 1.0),
+                                             ("gone", 5.0, 0.0)))
+    new = _tree(tmp_path, "new", 1.0, table=(("joint-space", 13.0, 1.0),
+                                             ("leg-edge", 50.0, 0.0),
+                                             ("leg-edge-qp", 215.0, 0.0)))
+    pairs = alternate(old, new, ["perf", "controllers", "--steps", "10"], rounds=3,
+                      warmup=0, report=lambda line: None)
+    assert pairs[0][0].steps_us == {"joint-space": 11.0, "leg-edge": 40.0,
+                                    "leg-edge-qp": 200.0, "gone": 5.0}
+    assert pairs[0][0].trials_s is None  # (no trials line)
+    lines = summary(pairs)
+    steps = lines[lines.index(next(x for x in lines if x.startswith("per-trial"))) + 1:]
+    assert steps == [
+        "joint-space: 14.0 / 17.0 us [11.0, 14.0, 19.0 / 14.0, 17.0, 22.0]: +3.0 us, "
+        "+21 %: within",
+        "leg-edge: 40.0 / 50.0 us [40.0, 40.0, 40.0 / 50.0, 50.0, 50.0]: +10.0 us, +25 %: "
+        "BEHIND",
+        "leg-edge-qp: 203.0 / 215.0 us [200.0, 203.0, 208.0 / 215.0, 215.0, 215.0]: +12.0 "
+        "us, +6 %: within",
+        "not timed by every run (left out): gone"]
