@@ -174,7 +174,7 @@ def alternate(old: Path, new: Path, args: Sequence[str], rounds: int, warmup: in
     Raises:
         AlternationError: A run failed (with the pairs timed before it).
     """
-    trees = {"old": Path(old).resolve(), "new": Path(new).resolve()}
+    trees = {"old": old, "new": new}  # (cli_in_tree resolves them)
     pairs: list[tuple[Timed, Timed]] = []
     with tempfile.TemporaryDirectory(prefix="hexapod-alternate-") as scratch:
         for k in range(warmup + rounds):

@@ -258,14 +258,8 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
     while it runs unless ``--verbose`` (the logger's level restored after: a later run
     of the same process logs as it asks)."""
     quiet = logging.getLogger().getEffectiveLevel() > logging.INFO  # (not --verbose)
-    dask_log = logging.getLogger("distributed")
-    level = dask_log.level
-    if quiet:
-        dask_log.setLevel(logging.ERROR)
-    try:
+    with _loggers_at(logging.ERROR if quiet else None, "distributed"):
         yield from _dask_results(units, address, workers, quiet)
-    finally:
-        dask_log.setLevel(level)
 
 
 def _dask_results(units: list[WorkUnit], address: str, workers: int, quiet: bool
@@ -373,15 +367,23 @@ def _silent_while_stopping() -> Iterator[None]:
     code with a traceback (``distributed.utils.sync``'s cancel callback: "cannot access
     free variable 'future'") and "Couldn't gather keys", which said nothing to a user who
     pressed Ctrl-C and looked like a crash; the run's own message says how it stopped."""
-    loggers = [logging.getLogger(name) for name in ("distributed", "tornado")]
+    with _loggers_at(logging.CRITICAL + 1, "distributed", "tornado"):
+        yield
+
+
+@contextlib.contextmanager
+def _loggers_at(level: int | None, *names: str) -> Iterator[None]:
+    """The loggers ``names`` at ``level`` in the block (None: as they are), each one's own
+    level restored after."""
+    loggers = [logging.getLogger(name) for name in names]
     levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL + 1)
     try:
+        for lg in loggers if level is not None else ():
+            lg.setLevel(level)  # type: ignore[arg-type]
         yield
     finally:
-        for lg, level in zip(loggers, levels, strict=True):
-            lg.setLevel(level)
+        for lg, before in zip(loggers, levels, strict=True):
+            lg.setLevel(before)
 
 
 @contextlib.contextmanager
