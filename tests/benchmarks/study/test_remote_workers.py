@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from benchmarks.sim import run_trials
-from benchmarks.study.runner import plan, read_results, run_units
+from benchmarks.study.runner import dask_workers, plan, read_results, run_units
 from benchmarks.study.scenario import load_scenario
 from hexapod import deltalab
 from hexapod.exceptions import ConfigFileError
@@ -67,7 +67,7 @@ def test_a_worker_that_cannot_see_the_files_runs_the_study(tmp_path: Path) -> No
     try:
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
-             "--nworkers", "1", "--nthreads", "1", "--no-dashboard", "--local-directory",
+             "--nworkers", "1", "--nthreads", "2", "--no-dashboard", "--local-directory",
              str(elsewhere)], cwd=elsewhere, env=env, stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL))
         from dask.distributed import Client
@@ -82,6 +82,9 @@ def test_a_worker_that_cannot_see_the_files_runs_the_study(tmp_path: Path) -> No
                 pass
             assert time.monotonic() < deadline, "the Dask worker did not start"
             time.sleep(0.5)
+        # with --dask ADDRESS the units are cut for the scheduler's threads (they were cut
+        # for --workers, default 1: each unit a whole controller's trials)
+        assert dask_workers(f"tcp://127.0.0.1:{port}", 1) == 2
         out = tmp_path / "out"
         assert run_units(units, out, dask=f"tcp://127.0.0.1:{port}") == 4
     finally:

@@ -497,17 +497,12 @@ def test_a_dask_address_that_is_none_is_refused_naming_the_option(
     assert not _cluster_failure(FileNotFoundError("robot.toml"))
 
 
-def test_a_dask_scheduler_s_threads_share_the_units() -> None:
-    """With --dask ADDRESS the units were cut for --workers (default 1: each a whole
-    controller's trials); they are cut for the scheduler's threads now."""
-    from distributed import LocalCluster
-
+def test_a_local_dask_run_has_the_workers_it_was_given() -> None:
+    """(A scheduler's threads: ``test_remote_workers``, with a real scheduler and worker.)"""
     from benchmarks.study.runner import dask_workers
 
-    with LocalCluster(n_workers=1, threads_per_worker=3, processes=False,
-                      dashboard_address=":0") as cluster:
-        assert dask_workers(cluster.scheduler_address, 1) == 3
     assert dask_workers("local", 2) == 2
+    assert dask_workers("local", 1) == 1
 
 
 def test_a_resume_with_another_record_count_says_so(
