@@ -5,8 +5,9 @@
 trial counts (3 per controller and sweep point; 1, with 60 steps, for the image
 scenarios), one worker, keeping every trial's time series; ``diff OUT_A OUT_B``
 compares two such runs: per scenario ``bitwise`` or the largest relative difference of
-a row field and the largest absolute difference of a series. The controller and
-detector timings are left out.
+a row field and the largest absolute difference of a series, with the controllers that
+differ; the rows of controllers and the scenarios only one run has are named. The
+controller and detector timings are left out.
 
 Run: ``python -m benchmarks.perf.rows_diff run /path/to/old /tmp/rows/old`` (a second
 tree from ``git worktree add /path/to/old REV``), the same for the new tree, then
@@ -64,52 +65,73 @@ def _rows(folder: str) -> dict[tuple[Any, ...], dict[str, Any]]:
 
 
 def diff(a: str, b: str) -> int:
-    """Print the comparison of two runs; returns the number of scenarios that differ."""
+    """Print the comparison of two runs; returns the number of scenarios that differ.
+
+    The rows both runs have are compared (a scenario's controllers that differ named);
+    rows of controllers only one run has (a controller added to a scenario) are counted
+    and named, and make the scenario differ; a scenario only one run has is named, not
+    compared."""
     differing = 0
-    for folder_a in sorted(glob.glob(f"{a}/*/")):
-        name = os.path.basename(folder_a.rstrip("/"))
-        folder_b = f"{b}/{name}"
+    names_a = {os.path.basename(f.rstrip("/")) for f in glob.glob(f"{a}/*/")}
+    names_b = {os.path.basename(f.rstrip("/")) for f in glob.glob(f"{b}/*/")}
+    for name in sorted(names_a ^ names_b):
+        print(f"{name}: only in {a if name in names_a else b} (not compared)")
+    for name in sorted(names_a & names_b):
+        folder_a, folder_b = f"{a}/{name}", f"{b}/{name}"
         ra, rb = _rows(folder_a), _rows(folder_b)
-        if ra.keys() != rb.keys():
-            print(f"{name}: different rows ({len(ra)} against {len(rb)})")
-            differing += 1
-            continue
-        worst, series_worst, exact = 0.0, 0.0, True
+        alone = [_by_controller(ra.keys() - rb.keys()), _by_controller(rb.keys() - ra.keys())]
+        worst, series_worst = 0.0, 0.0
         other: list[tuple[Any, ...]] = []
-        for k, row in ra.items():
-            for field, x in row.items():
+        changed: set[str] = set()
+        for k in ra.keys() & rb.keys():
+            for field, x in ra[k].items():
                 y = rb[k].get(field)
                 if x == y:
                     continue
-                exact = False
+                changed.add(k[2])
                 if isinstance(x, float) and isinstance(y, float):
                     worst = max(worst, abs(x - y) / max(1.0, abs(x)))
                 else:
                     other.append((k, field, x, y))
         n_series = 0
         for fa in sorted(glob.glob(f"{folder_a}/trials/*.npz")):
-            za = np.load(fa)
-            zb = np.load(fa.replace(folder_a.rstrip("/"), folder_b))
+            fb = fa.replace(folder_a, folder_b)
+            if not os.path.exists(fb):  # (a trial only run A has: its row is named above)
+                continue
+            za, zb = np.load(fa), np.load(fb)
+            controller = str(za["controller"]) if "controller" in za.files else "?"
             for key in za.files:
-                if "time" in key:
+                if "time" in key or key not in zb.files:
                     continue
                 n_series += 1
                 xa, xb = za[key], zb[key]
                 if xa.shape != xb.shape:
-                    exact = False
+                    changed.add(controller)
                     other.append((fa, key, xa.shape, xb.shape))
                 elif not np.array_equal(xa, xb, equal_nan=xa.dtype.kind in "fc"):
-                    exact = False
+                    changed.add(controller)
                     if xa.dtype.kind in "fc":
                         series_worst = max(series_worst, float(np.nanmax(np.abs(xa - xb))))
                     else:
                         other.append((fa, key, "differs", ""))
-        status = ("bitwise" if exact else f"max relative difference of a row field {worst:.3g}"
-                  f", of a series {series_worst:.3g}")
-        print(f"{name}: {len(ra)} rows, {n_series} series: {status}"
+        common = len(ra.keys() & rb.keys())
+        status = ("bitwise" if not changed else
+                  f"max relative difference of a row field {worst:.3g}, of a series "
+                  f"{series_worst:.3g} (controllers {', '.join(sorted(changed))})")
+        extra = "".join(f"; {n} rows only in {side}: {which}" for side, (n, which)
+                        in zip((a, b), alone, strict=True) if n)
+        print(f"{name}: {common} rows, {n_series} series: {status}{extra}"
               + (f"; other differences: {other[:3]}" if other else ""))
-        differing += 0 if exact else 1
+        differing += 1 if changed or extra else 0
     return differing
+
+
+def _by_controller(keys: set[tuple[Any, ...]]) -> tuple[int, str]:
+    """How many row keys, and their controllers with their counts (``"a (3), b (1)"``)."""
+    counts: dict[str, int] = {}
+    for k in keys:
+        counts[str(k[2])] = counts.get(str(k[2]), 0) + 1
+    return len(keys), ", ".join(f"{c} ({n})" for c, n in sorted(counts.items()))
 
 
 def main(argv: list[str] | None = None) -> int:
