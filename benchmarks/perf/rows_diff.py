@@ -21,6 +21,7 @@ import json
 import os
 import sys
 import time
+from collections import Counter
 from typing import Any
 
 import numpy as np
@@ -70,7 +71,7 @@ def diff(a: str, b: str) -> int:
     The rows both runs have are compared (a scenario's controllers that differ named);
     rows of controllers only one run has (a controller added to a scenario) are counted
     and named, and make the scenario differ; a scenario only one run has is named, not
-    compared."""
+    compared. A row field only the second run has (a new metric) is not compared."""
     differing = 0
     names_a = {os.path.basename(f.rstrip("/")) for f in glob.glob(f"{a}/*/")}
     names_b = {os.path.basename(f.rstrip("/")) for f in glob.glob(f"{b}/*/")}
@@ -80,7 +81,7 @@ def diff(a: str, b: str) -> int:
         folder_a, folder_b = f"{a}/{name}", f"{b}/{name}"
         ra, rb = _rows(folder_a), _rows(folder_b)
         alone = [_by_controller(ra.keys() - rb.keys()), _by_controller(rb.keys() - ra.keys())]
-        worst, series_worst = 0.0, 0.0
+        worst = 0.0
         other: list[tuple[Any, ...]] = []
         changed: set[str] = set()
         for k in ra.keys() & rb.keys():
@@ -93,27 +94,7 @@ def diff(a: str, b: str) -> int:
                     worst = max(worst, abs(x - y) / max(1.0, abs(x)))
                 else:
                     other.append((k, field, x, y))
-        n_series = 0
-        for fa in sorted(glob.glob(f"{folder_a}/trials/*.npz")):
-            fb = fa.replace(folder_a, folder_b)
-            if not os.path.exists(fb):  # (a trial only run A has: its row is named above)
-                continue
-            za, zb = np.load(fa), np.load(fb)
-            controller = str(za["controller"]) if "controller" in za.files else "?"
-            for key in za.files:
-                if "time" in key or key not in zb.files:
-                    continue
-                n_series += 1
-                xa, xb = za[key], zb[key]
-                if xa.shape != xb.shape:
-                    changed.add(controller)
-                    other.append((fa, key, xa.shape, xb.shape))
-                elif not np.array_equal(xa, xb, equal_nan=xa.dtype.kind in "fc"):
-                    changed.add(controller)
-                    if xa.dtype.kind in "fc":
-                        series_worst = max(series_worst, float(np.nanmax(np.abs(xa - xb))))
-                    else:
-                        other.append((fa, key, "differs", ""))
+        n_series, series_worst = _series(folder_a, folder_b, changed, other)
         common = len(ra.keys() & rb.keys())
         status = ("bitwise" if not changed else
                   f"max relative difference of a row field {worst:.3g}, of a series "
@@ -126,11 +107,45 @@ def diff(a: str, b: str) -> int:
     return differing
 
 
+def _series(folder_a: str, folder_b: str, changed: set[str],
+            other: list[tuple[Any, ...]]) -> tuple[int, float]:
+    """Compare the recorded series of the trials both folders have (a trial only one has
+    is a row named by :func:`diff`), those of the first run (a series only the second
+    records is a new recording, as a row field only it has): how many series, and the
+    largest absolute difference; the controllers whose series differ added to ``changed``,
+    what cannot be subtracted (another shape, a series the second lacks, non-numbers) to
+    ``other``."""
+    n_series, worst = 0, 0.0
+    for fa in sorted(glob.glob(f"{folder_a}/trials/*.npz")):
+        fb = fa.replace(folder_a, folder_b)
+        if not os.path.exists(fb):
+            continue
+        za, zb = np.load(fa), np.load(fb)
+        controller = str(za["controller"]) if "controller" in za.files else "?"
+        for key in za.files:
+            if "time" in key:
+                continue
+            n_series += 1
+            if key not in zb.files:
+                changed.add(controller)
+                other.append((fa, key, "not in", fb))
+                continue
+            xa, xb = za[key], zb[key]
+            if xa.shape != xb.shape:
+                changed.add(controller)
+                other.append((fa, key, xa.shape, xb.shape))
+            elif not np.array_equal(xa, xb, equal_nan=xa.dtype.kind in "fc"):
+                changed.add(controller)
+                if xa.dtype.kind in "fc":
+                    worst = max(worst, float(np.nanmax(np.abs(xa - xb))))
+                else:
+                    other.append((fa, key, "differs", ""))
+    return n_series, worst
+
+
 def _by_controller(keys: set[tuple[Any, ...]]) -> tuple[int, str]:
     """How many row keys, and their controllers with their counts (``"a (3), b (1)"``)."""
-    counts: dict[str, int] = {}
-    for k in keys:
-        counts[str(k[2])] = counts.get(str(k[2]), 0) + 1
+    counts = Counter(str(k[2]) for k in keys)
     return len(keys), ", ".join(f"{c} ({n})" for c, n in sorted(counts.items()))
 
 

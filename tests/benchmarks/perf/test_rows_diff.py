@@ -65,3 +65,24 @@ def test_what_differs_is_named_by_controller_and_what_one_run_has_alone(
     assert lines[2] == (f"tracking: 1 rows, 0 series: bitwise; 2 rows only in {b}: "
                         "force-mpc (2)")
     assert len(lines) == 3
+
+
+def test_a_series_the_second_run_lost_differs_and_a_new_one_does_not(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A series recorded by the first run only makes its controller differ; one recorded
+    by the second run only (a new recording, as a new row field) is not compared."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    for side in (a, b):
+        _run(side, "quick", [("leg-edge", 0, 0.25)], {("leg-edge", 0): np.array([1.0])})
+    trial = "trials/quick__p0__leg-edge__00000.npz"
+    np.savez(b / "quick" / trial, controller=np.array("leg-edge"), t=np.zeros(1),
+             error_norm=np.array([1.0]), forces=np.zeros(1))  # a new series
+    assert diff(str(a), str(b)) == 0
+    np.savez(b / "quick" / trial, controller=np.array("leg-edge"), t=np.zeros(1))
+    assert diff(str(a), str(b)) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "quick: 1 rows, 3 series: bitwise"
+    assert out[1].startswith("quick: 1 rows, 3 series: max relative difference of a row "
+                             "field 0, of a series 0 (controllers leg-edge); other "
+                             "differences: [(")
+    assert "'error_norm', 'not in'" in out[1]
