@@ -80,11 +80,12 @@ def diff(a: str, b: str) -> int:
     for name in sorted(names_a & names_b):
         folder_a, folder_b = f"{a}/{name}", f"{b}/{name}"
         ra, rb = _rows(folder_a), _rows(folder_b)
-        alone = [_by_controller(ra.keys() - rb.keys()), _by_controller(rb.keys() - ra.keys())]
+        both = ra.keys() & rb.keys()
+        alone = [_by_controller(ra.keys() - both), _by_controller(rb.keys() - both)]
         worst = 0.0
         other: list[tuple[Any, ...]] = []
         changed: set[str] = set()
-        for k in ra.keys() & rb.keys():
+        for k in both:
             for field, x in ra[k].items():
                 y = rb[k].get(field)
                 if x == y:
@@ -95,13 +96,12 @@ def diff(a: str, b: str) -> int:
                 else:
                     other.append((k, field, x, y))
         n_series, series_worst = _series(folder_a, folder_b, changed, other)
-        common = len(ra.keys() & rb.keys())
         status = ("bitwise" if not changed else
                   f"max relative difference of a row field {worst:.3g}, of a series "
                   f"{series_worst:.3g} (controllers {', '.join(sorted(changed))})")
         extra = "".join(f"; {n} rows only in {side}: {which}" for side, (n, which)
                         in zip((a, b), alone, strict=True) if n)
-        print(f"{name}: {common} rows, {n_series} series: {status}{extra}"
+        print(f"{name}: {len(both)} rows, {n_series} series: {status}{extra}"
               + (f"; other differences: {other[:3]}" if other else ""))
         differing += 1 if changed or extra else 0
     return differing
