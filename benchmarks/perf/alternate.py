@@ -8,7 +8,8 @@ run of each after the other, several times, the order turned every pair (``OLD N
 arguments replaced by a new directory per run; the first ``--warmup`` pairs are run and
 left out (a tree's first run may compile its kernels). Printed: each pair's wall times,
 the ratio old / new, and the median ratio, then the same for the trials alone when the
-command prints them (``run``'s ``N trials in X s``), and for ``perf controllers`` each
+command prints them (``run``'s ``N trials in X s``) with each tree's time outside them,
+and for ``perf controllers`` each
 controller's per-trial step (its median us in each run, the median over the pairs, and
 whether the new one is within 10 % or 5 us of the old: the measure of a change that should
 not slow any step); when a run fails, the pairs timed before it, then its error.
@@ -129,7 +130,21 @@ def summary(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:
     if alone:
         lines.append(f"trials alone: median {statistics.median(alone):.2f} times "
                      f"({min(alone):.2f} to {max(alone):.2f})")
+        lines.append(outside_line(pairs))
     return lines + step_lines(pairs)
+
+
+def outside_line(pairs: Sequence[tuple[Timed, Timed]]) -> str:
+    """The runs' time outside their trials (wall minus trials: the start, imports,
+    pre-flight and report) [s], old and new, of the pairs whose runs printed both."""
+    def spans(runs: list[Timed]) -> str:
+        rest = [t.wall_s - t.trials_s for t in runs if t.trials_s is not None]
+        return f"{min(rest):.2f} to {max(rest):.2f} s (median {statistics.median(rest):.2f})"
+
+    both = [(old, new) for old, new in pairs
+            if old.trials_s is not None and new.trials_s is not None]
+    return (f"outside the trials: old {spans([o for o, _ in both])}, new "
+            f"{spans([n for _, n in both])}")
 
 
 def step_lines(pairs: Sequence[tuple[Timed, Timed]]) -> list[str]:

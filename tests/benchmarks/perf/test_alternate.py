@@ -67,7 +67,8 @@ def test_runs_alternate_in_their_trees_with_a_new_directory_each(
     out = summary(pairs)
     assert out[0].endswith("(trials 14.0 / 4.0 s, 3.50 times)")
     assert out[2].endswith("(trials 16.0 / 8.0 s, 2.00 times)")
-    assert out[-1] == "trials alone: median 2.50 times (2.00 to 3.50)"
+    assert out[-2] == "trials alone: median 2.50 times (2.00 to 3.50)"
+    assert out[-1].startswith("outside the trials: old ")
 
 
 def test_a_relative_tree_is_read_from_the_working_directory(
@@ -119,6 +120,17 @@ def test_summary_gives_each_pair_and_the_median_ratio() -> None:
     assert len(lines) == 4  # no trials line: none printed
 
 
+def test_summary_gives_the_time_outside_the_trials() -> None:
+    """Wall minus trials, of the pairs whose two runs printed their trials (the third
+    pair's old run did not: left out of both sides)."""
+    pairs = [(Timed("a", 62.0, 57.75), Timed("b", 15.25, 12.75)),
+             (Timed("a", 60.0, 55.0), Timed("b", 15.0, 12.0)),
+             (Timed("a", 61.0, None), Timed("b", 14.0, 13.5))]
+    lines = summary(pairs)
+    assert lines[-1] == ("outside the trials: old 4.25 to 5.00 s (median 4.62), new 2.50 to "
+                         "3.00 s (median 2.75)")
+
+
 def test_summary_leaves_out_a_trials_ratio_it_cannot_form() -> None:
     """A run that printed ``0.0 s`` of trials (a short command) had divided by zero after
     every pair had run; its pair's trials ratio is left out, the others' median kept."""
@@ -128,7 +140,7 @@ def test_summary_leaves_out_a_trials_ratio_it_cannot_form() -> None:
              (Timed("a", 4.0, 2.0), Timed("b", 5.0, 2.0))]
     lines = summary(pairs)
     assert lines[1] == "pair 2: old 9.00 s, new 3.00 s, 3.00 times"
-    assert lines[-1] == "trials alone: median 3.00 times (1.00 to 6.00)"
+    assert lines[-2] == "trials alone: median 3.00 times (1.00 to 6.00)"
 
 
 @pytest.mark.parametrize(("extra", "message"), [
