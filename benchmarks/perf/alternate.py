@@ -9,10 +9,10 @@ arguments replaced by a new directory per run; the first ``--warmup`` pairs are 
 left out (a tree's first run may compile its kernels). Printed: each pair's wall times,
 the ratio old / new, and the median ratio, then the same for the trials alone when the
 command prints them (``run``'s ``N trials in X s``) with each tree's time outside them,
-and for ``perf controllers`` each
-controller's per-trial step (its median us in each run, the median over the pairs, and
-whether the new one is within 10 % or 5 us of the old: the measure of a change that should
-not slow any step); when a run fails, the pairs timed before it, then its error.
+and for ``perf controllers`` each controller's per-trial step (its median us in each run,
+the median over the pairs, and whether the new one is within 10 % or 5 us of the old: the
+measure of a change that should not slow any step); when a run fails, the pairs timed
+before it, then its error.
 
 Run (a tree of the old commit from ``git worktree add /tmp/old REV``)::
 
